@@ -1,0 +1,374 @@
+"""The cell description as validated, frozen dataclasses in SI units (frame ``cell``, REP-103).
+
+x runs along the main conveying direction, y to the left, z up. Every length is in m, every
+time in s, every angle in rad, masses in kg, inertias in kg m^2. The loader in
+:mod:`conveyor_twin.cell.loader` is the only way these are built from a file; it guarantees
+the invariants documented on each class.
+"""
+
+from dataclasses import dataclass, field
+import math
+from typing import Optional, Tuple
+
+Point = Tuple[float, float]
+Rect = Tuple[float, float, float, float]  # (x_min, y_min, x_max, y_max) [m]
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Cell-wide settings.
+
+    :param name: cell name, used in summaries and recordings.
+    :param frame_id: frame of every published pose.
+    :param step: simulation step [s]; 1e-3 by default.
+    :param gravity: gravitational acceleration [m/s^2] (normal force on the belt).
+    :param seed: default random seed for sources.
+    """
+
+    name: str
+    frame_id: str = 'cell'
+    step: float = 1e-3
+    gravity: float = 9.81
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Belt:
+    """A straight belt: a rectangle along the segment ``start``-``end`` of width ``width``.
+
+    :param speed: initial target speed [m/s] along ``direction`` (negative runs backwards).
+    :param max_speed: largest admissible |speed| [m/s]; commands beyond it are rejected.
+    :param acceleration: largest rate of speed change [m/s^2].
+    :param friction: part-belt Coulomb coefficient (drive force bounded by ``friction m g``).
+    """
+
+    name: str
+    start: Point
+    end: Point
+    width: float
+    speed: float
+    max_speed: float
+    acceleration: float
+    friction: float
+
+    @property
+    def length(self) -> float:
+        """Length of the belt [m]."""
+        return math.hypot(self.end[0] - self.start[0], self.end[1] - self.start[1])
+
+    @property
+    def direction(self) -> Point:
+        """Unit vector of the running direction."""
+        length = self.length
+        return ((self.end[0] - self.start[0]) / length, (self.end[1] - self.start[1]) / length)
+
+    @property
+    def angle(self) -> float:
+        """Heading of the running direction [rad]."""
+        return math.atan2(self.end[1] - self.start[1], self.end[0] - self.start[0])
+
+    def corners(self) -> Tuple[Point, Point, Point, Point]:
+        """Return the four corners of the belt surface, counter-clockwise [m]."""
+        dx, dy = self.direction
+        nx, ny = -dy * self.width / 2, dx * self.width / 2
+        (x0, y0), (x1, y1) = self.start, self.end
+        return ((x0 - nx, y0 - ny), (x1 - nx, y1 - ny), (x1 + nx, y1 + ny), (x0 + nx, y0 + ny))
+
+
+OBSTACLE_KINDS = ('wall', 'deflector', 'peg', 'polygon')
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A fixed obstacle (infinite mass).
+
+    ``wall`` and ``deflector``: a polyline through ``points`` of full thickness ``thickness``
+    (a capsule chain of radius ``thickness/2``). ``peg``: a round peg at ``points[0]`` of
+    ``radius``. ``polygon``: a convex polygon, ``points`` counter-clockwise.
+
+    :param restitution: coefficient of restitution against parts, 0..1.
+    :param friction: Coulomb coefficient against parts.
+    """
+
+    name: str
+    kind: str
+    points: Tuple[Point, ...]
+    thickness: float = 0.0
+    radius: float = 0.0
+    restitution: float = 0.3
+    friction: float = 0.2
+
+
+PART_SHAPES = ('disc', 'box')
+
+
+@dataclass(frozen=True)
+class PartType:
+    """A kind of part. Its index in :attr:`Cell.part_types` is the ``part_type`` on the wire.
+
+    :param shape: ``disc`` (standing cylinder of ``radius``) or ``box`` (``length`` x ``width``,
+        ``length`` along the body x axis).
+    :param height: height above the belt [m] (light barriers see a part if beam height < height).
+    :param mass: [kg]. :param inertia: about the vertical axis [kg m^2].
+    :param restitution: part-part coefficient of restitution (the pair uses the mean).
+    :param friction_static: impact friction coefficient at zero tangential speed (seed 002).
+    :param friction_sliding: impact friction coefficient above ``friction_transition_speed``.
+    :param friction_transition_speed: tangential speed [m/s] where sliding friction is reached.
+    """
+
+    name: str
+    shape: str
+    radius: float
+    length: float
+    width: float
+    height: float
+    mass: float
+    inertia: float
+    restitution: float
+    friction_static: float
+    friction_sliding: float
+    friction_transition_speed: float
+
+    @property
+    def bounding_radius(self) -> float:
+        """Radius of the smallest circle around the centre that holds the footprint [m]."""
+        if self.shape == 'disc':
+            return self.radius
+        return 0.5 * math.hypot(self.length, self.width)
+
+    @property
+    def footprint_area(self) -> float:
+        """Area of the footprint on the belt [m^2]."""
+        if self.shape == 'disc':
+            return math.pi * self.radius ** 2
+        return self.length * self.width
+
+
+SOURCE_PATTERNS = ('uniform', 'poisson', 'burst')
+
+
+@dataclass(frozen=True)
+class Source:
+    """Where parts enter: spawned at random poses in ``region``, never overlapping anything.
+
+    :param rate: mean rate [parts/s].
+    :param pattern: ``uniform`` (every 1/rate s), ``poisson`` (exponential gaps) or ``burst``
+        (``burst_size`` parts every burst_size/rate s).
+    :param velocity: initial velocity [m/s]; ``None`` means the local belt surface velocity.
+    :param yaw: initial yaw [rad]; ``None`` means uniformly random.
+    :param start_time: first spawn not before this sim time [s].
+    :param max_parts: stop after this many parts; 0 means unlimited.
+    :param seed: stream offset, combined with the run's seed.
+    """
+
+    name: str
+    part_type: str
+    region: Rect
+    rate: float
+    pattern: str = 'uniform'
+    burst_size: int = 1
+    velocity: Optional[Point] = None
+    yaw: Optional[float] = None
+    start_time: float = 0.0
+    max_parts: int = 0
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Sink:
+    """Parts whose centre enters ``region`` leave the cell and are counted."""
+
+    name: str
+    region: Rect
+
+
+@dataclass(frozen=True)
+class LightBarrier:
+    """A light beam from ``start`` to ``end`` at ``height`` above the belt [m].
+
+    It is blocked while any part taller than ``height`` intersects the beam segment.
+    """
+
+    name: str
+    start: Point
+    end: Point
+    height: float
+
+
+ACTUATOR_KINDS = ('pusher', 'stopper', 'diverter')
+
+
+@dataclass(frozen=True)
+class Actuator:
+    """A kinematic actuator moving toward its commanded position at ``max_speed``.
+
+    ``pusher``: a rectangular paddle (``length`` along ``axis``, ``width`` across) whose centre is
+    at ``base + position * axis``; position in m.
+    ``stopper``: a pop-up blade, footprint ``length`` along ``axis`` by ``width``, centred at
+    ``base``; position is its lift [m]; it blocks parts while lifted at least ``engage_height``.
+    ``diverter``: an arm of ``length`` and thickness ``width`` rotating about the pivot ``base``;
+    at position θ [rad] it points along ``axis`` rotated by θ.
+
+    :param position_range: admissible (min, max) position; commands outside are rejected.
+    :param max_speed: [m/s] or [rad/s]. :param initial_position: position at reset.
+    """
+
+    name: str
+    kind: str
+    base: Point
+    axis: Point
+    length: float
+    width: float
+    position_range: Tuple[float, float]
+    max_speed: float
+    initial_position: float
+    engage_height: float = 0.0
+    restitution: float = 0.2
+    friction: float = 0.2
+
+    @property
+    def is_rotary(self) -> bool:
+        """True if the position is an angle [rad]."""
+        return self.kind == 'diverter'
+
+
+ZONE_POLICIES = ('micro', 'macro', 'auto')
+
+
+@dataclass(frozen=True)
+class AutoSwitch:
+    """Parameters of the ``auto`` policy.
+
+    :param tile: edge of the square tiles that switch independently [m].
+    :param to_macro_density: a micro tile turns macro above this density [parts/m^2].
+    :param to_micro_density: a macro tile turns micro below this density [parts/m^2].
+    :param min_dwell: least time between two switches of a tile [s].
+    :param sensor_margin: tiles within this distance of a light barrier or an actuator stay
+        micro [m].
+    """
+
+    tile: float = 0.25
+    to_macro_density: float = 4000.0
+    to_micro_density: float = 1500.0
+    min_dwell: float = 0.5
+    sensor_margin: float = 0.1
+
+
+@dataclass(frozen=True)
+class Zone:
+    """A rectangular region of the belt surface simulated at one scale.
+
+    :param resolution: cell size of its macro grid [m] (square cells).
+    """
+
+    name: str
+    policy: str
+    region: Rect
+    resolution: float
+    auto: AutoSwitch = field(default_factory=AutoSwitch)
+
+
+CONTACT_MODELS = ('impulse', 'penalty')
+
+
+@dataclass(frozen=True)
+class MicroModel:
+    """Micro-scale parameters.
+
+    :param contact: ``impulse`` (seed 000) or ``penalty`` (spring-damper, seed 001).
+    :param capacity: preallocated number of part slots.
+    :param penetration_slop: penetration left uncorrected [m].
+    :param penetration_correction: fraction of the remaining penetration removed per step, 0..1.
+    :param penalty_stiffness: contact spring [N/m] (penalty model).
+    :param penalty_damping: contact damper [N s/m] (penalty model).
+    :param max_travel_fraction: largest displacement per substep as a fraction of the smallest
+        part radius; more substeps are taken when parts move faster (no tunnelling).
+    """
+
+    contact: str = 'impulse'
+    capacity: int = 20000
+    penetration_slop: float = 1e-4
+    penetration_correction: float = 0.8
+    penalty_stiffness: float = 1e5
+    penalty_damping: float = 5.0
+    max_travel_fraction: float = 0.5
+
+
+MACRO_VARIANTS = ('capped', 'goettlich')
+MACRO_SCHEMES = ('upwind', 'limited')
+
+
+@dataclass(frozen=True)
+class MacroModel:
+    """Macro-scale parameters.
+
+    :param variant: ``capped`` (seed 000 flux) or ``goettlich`` (collision operator, 2014).
+    :param scheme: ``upwind`` (first order) or ``limited`` (second order, minmod-limited).
+    :param rho_max: maximum density [parts/m^2]; 0 derives hexagonal packing of the first part
+        type, ``1 / (2 sqrt(3) R^2)``.
+    :param epsilon: strength of the collision operator [m/s].
+    :param mollifier_width: support radius of the mollifier [m]; 0 means two grid cells.
+    :param cfl: Courant number per substep, (0, 1].
+    """
+
+    variant: str = 'goettlich'
+    scheme: str = 'upwind'
+    rho_max: float = 0.0
+    epsilon: float = 0.5
+    mollifier_width: float = 0.0
+    cfl: float = 0.9
+
+
+@dataclass(frozen=True)
+class Cell:
+    """A whole validated cell. Names are unique within each list."""
+
+    source_file: str
+    settings: Settings
+    belts: Tuple[Belt, ...]
+    obstacles: Tuple[Obstacle, ...]
+    part_types: Tuple[PartType, ...]
+    sources: Tuple[Source, ...]
+    sinks: Tuple[Sink, ...]
+    light_barriers: Tuple[LightBarrier, ...]
+    actuators: Tuple[Actuator, ...]
+    zones: Tuple[Zone, ...]
+    micro: MicroModel
+    macro: MacroModel
+
+    def part_type_index(self, name: str) -> int:
+        """Return the wire index of the part type ``name``; raise KeyError if unknown."""
+        for index, part_type in enumerate(self.part_types):
+            if part_type.name == name:
+                return index
+        raise KeyError(name)
+
+    def belt_index(self, name: str) -> int:
+        """Return the index of the belt ``name``; raise KeyError if unknown."""
+        for index, belt in enumerate(self.belts):
+            if belt.name == name:
+                return index
+        raise KeyError(name)
+
+    def actuator_index(self, name: str) -> int:
+        """Return the index of the actuator ``name``; raise KeyError if unknown."""
+        for index, actuator in enumerate(self.actuators):
+            if actuator.name == name:
+                return index
+        raise KeyError(name)
+
+    @property
+    def rho_max(self) -> float:
+        """Maximum macro density [parts/m^2] (configured or from hexagonal packing)."""
+        if self.macro.rho_max > 0.0:
+            return self.macro.rho_max
+        reference = self.part_types[0]
+        radius = math.sqrt(reference.footprint_area / math.pi)
+        return 1.0 / (2.0 * math.sqrt(3.0) * radius * radius)
+
+    @property
+    def bounds(self) -> Rect:
+        """Bounding rectangle of all belts [m]."""
+        xs = [c[0] for belt in self.belts for c in belt.corners()]
+        ys = [c[1] for belt in self.belts for c in belt.corners()]
+        return (min(xs), min(ys), max(xs), max(ys))

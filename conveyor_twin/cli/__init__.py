@@ -1,0 +1,37 @@
+"""The ``conveyor-twin`` command: a dictionary of verbs, each a module with ``main(argv)``."""
+
+import importlib
+import sys
+from typing import List, Optional
+
+# verb -> (module, one-line help). Each module has ``main(argv: List[str]) -> int``.
+VERBS = {
+    'run': ('conveyor_twin.cli.run', 'run the twin on a cell (default: the embedded cell)'),
+    'validate': ('conveyor_twin.cli.validate', 'check a cell file and summarise it'),
+    'bench': ('conveyor_twin.cli.bench', 'run a benchmark: micro, macro, twin, scale'),
+}
+
+
+def _usage() -> str:
+    lines = ['usage: conveyor-twin VERB [options]', '', 'verbs:']
+    lines += [f'  {verb:<12}{help_}' for verb, (_, help_) in VERBS.items()]
+    lines += ['', "'conveyor-twin VERB --help' describes a verb."]
+    return '\n'.join(lines)
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Dispatch ``conveyor-twin VERB ...`` to the verb's module; return the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ('-h', '--help'):
+        print(_usage())
+        return 0 if argv else 2
+    verb = argv[0]
+    if verb not in VERBS:
+        print(f'conveyor-twin: unknown verb {verb!r}\n\n{_usage()}', file=sys.stderr)
+        return 2
+    module = importlib.import_module(VERBS[verb][0])
+    return int(module.main(argv[1:]) or 0)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
