@@ -1,0 +1,1 @@
+"""Coordination core: time, commands, actuation and the step schedule (no ROS imports)."""

@@ -1,0 +1,134 @@
+"""Validated, step-stamped command queue.
+
+Commands arrive from any thread (ROS callbacks); they are validated at once, and the valid ones
+wait in a queue until the next step boundary, where :meth:`CommandBook.drain` stamps them with
+the step at which they take effect. Invalid commands are never applied: they are counted per
+reason and reported back to the caller.
+"""
+
+from collections import Counter, deque
+from dataclasses import dataclass
+import math
+import threading
+from typing import Deque, Dict, List, Optional, Tuple
+
+from conveyor_twin.cell.model import Cell
+
+BELT = 'belt'
+ACTUATOR = 'actuator'
+
+
+@dataclass(frozen=True)
+class Command:
+    """A valid command. ``step`` is the step at which it takes effect (-1 while pending).
+
+    :param kind: ``belt`` (value = target speed [m/s]) or ``actuator`` (value = target position,
+        m or rad).
+    :param index: index of the belt or actuator in the cell.
+    """
+
+    kind: str
+    name: str
+    index: int
+    value: float
+    step: int = -1
+
+
+class CommandRejected(ValueError):
+    """A command failed validation; the message says why."""
+
+
+class CommandBook:
+    """Validate commands against a cell, queue them, and stamp them at the step boundary."""
+
+    def __init__(self, cell: Cell) -> None:
+        self._belts: Dict[str, Tuple[int, float]] = {
+            b.name: (i, b.max_speed) for i, b in enumerate(cell.belts)}
+        self._actuators: Dict[str, Tuple[int, float, float, str]] = {
+            a.name: (i, a.position_range[0], a.position_range[1], 'rad' if a.is_rotary else 'm')
+            for i, a in enumerate(cell.actuators)}
+        self._pending: Deque[Command] = deque()
+        self._scheduled: Dict[int, List[Command]] = {}
+        self._lock = threading.Lock()
+        self.rejected: Counter = Counter()
+        self.last_rejection = ''
+
+    @property
+    def rejected_total(self) -> int:
+        """Number of commands rejected so far."""
+        return sum(self.rejected.values())
+
+    def _reject(self, reason: str, message: str) -> CommandRejected:
+        with self._lock:
+            self.rejected[reason] += 1
+            self.last_rejection = message
+        return CommandRejected(message)
+
+    def validate_belt(self, belt: str, speed: float) -> Command:
+        """Return the valid belt command or raise :class:`CommandRejected`."""
+        if belt not in self._belts:
+            known = ', '.join(self._belts)
+            raise self._reject('unknown_belt', f'belt_command: unknown belt {belt!r} '
+                               f'(known: {known})')
+        index, max_speed = self._belts[belt]
+        if not math.isfinite(speed):
+            raise self._reject('not_finite', f'belt_command: speed {speed!r} for belt {belt!r} '
+                               'is not finite')
+        if abs(speed) > max_speed:
+            raise self._reject('out_of_range', f'belt_command: speed {speed!r} m/s for belt '
+                               f'{belt!r} is outside [{-max_speed:g}, {max_speed:g}] m/s')
+        return Command(BELT, belt, index, float(speed))
+
+    def validate_actuator(self, actuator: str, position: float) -> Command:
+        """Return the valid actuator command or raise :class:`CommandRejected`."""
+        if actuator not in self._actuators:
+            known = ', '.join(self._actuators) or 'none'
+            raise self._reject('unknown_actuator', f'actuator_command: unknown actuator '
+                               f'{actuator!r} (known: {known})')
+        index, low, high, unit = self._actuators[actuator]
+        if not math.isfinite(position):
+            raise self._reject('not_finite', f'actuator_command: position {position!r} for '
+                               f'actuator {actuator!r} is not finite')
+        if not low <= position <= high:
+            raise self._reject('out_of_range', f'actuator_command: position {position!r} '
+                               f'{unit} for actuator {actuator!r} is outside '
+                               f'[{low:g}, {high:g}] {unit}')
+        return Command(ACTUATOR, actuator, index, float(position))
+
+    def submit(self, command: Command) -> None:
+        """Queue a validated command for the next step boundary (thread-safe)."""
+        self._pending.append(command)
+
+    def submit_belt(self, belt: str, speed: float) -> Command:
+        """Validate and queue a belt command; raise :class:`CommandRejected` if invalid."""
+        command = self.validate_belt(belt, speed)
+        self.submit(command)
+        return command
+
+    def submit_actuator(self, actuator: str, position: float) -> Command:
+        """Validate and queue an actuator command; raise :class:`CommandRejected` if invalid."""
+        command = self.validate_actuator(actuator, position)
+        self.submit(command)
+        return command
+
+    def schedule(self, step: int, command: Command) -> None:
+        """Apply an already validated command exactly at ``step`` (re-simulation)."""
+        self._scheduled.setdefault(step, []).append(command)
+
+    def drain(self, step: int) -> List[Command]:
+        """Return the commands that take effect at ``step``, stamped with it, in arrival order.
+
+        Scheduled commands for this step come first, then the live queue.
+        """
+        out = [Command(c.kind, c.name, c.index, c.value, step)
+               for c in self._scheduled.pop(step, ())]
+        pending = self._pending
+        while pending:
+            c = pending.popleft()
+            out.append(Command(c.kind, c.name, c.index, c.value, step))
+        return out
+
+    def clear(self) -> None:
+        """Forget pending and scheduled commands (reset); counters are kept."""
+        self._pending.clear()
+        self._scheduled.clear()

@@ -1,0 +1,109 @@
+"""Real-time pacing on absolute deadlines, and step-time statistics."""
+
+from enum import Enum
+import time
+from typing import Dict
+
+import numpy as np
+
+
+class TimeMode(str, Enum):
+    """How simulation time advances."""
+
+    REALTIME = 'realtime'  # paced by the wall clock on absolute deadlines
+    FAST = 'fast'          # as fast as possible
+    LOCKSTEP = 'lockstep'  # only when asked (the ``step`` service)
+
+
+class DeadlinePacer:
+    """Sleep until absolute deadlines ``t0 + k * period`` so there is no drift.
+
+    A step whose work ends after its deadline is an overrun; the pacer never skips steps to
+    catch up (it runs late steps back to back), so overruns are counted, never hidden.
+
+    :param period_ns: step period [ns].
+    """
+
+    def __init__(self, period_ns: int) -> None:
+        self.period_ns = period_ns
+        self.start_ns = time.monotonic_ns()
+        self.index = 0
+        self.overruns = 0
+        self.max_lateness_ns = 0
+
+    def restart(self) -> None:
+        """Start a new series of deadlines from now."""
+        self.start_ns = time.monotonic_ns()
+        self.index = 0
+
+    def wait_next(self) -> None:
+        """Count an overrun if the current step ended late, then sleep to the next deadline."""
+        self.index += 1
+        deadline = self.start_ns + self.index * self.period_ns
+        now = time.monotonic_ns()
+        if now > deadline:
+            self.overruns += 1
+            self.max_lateness_ns = max(self.max_lateness_ns, now - deadline)
+            return
+        remaining = deadline - now
+        if remaining > 200_000:
+            time.sleep((remaining - 150_000) * 1e-9)
+        while time.monotonic_ns() < deadline:
+            pass
+
+
+_HIST_BIN_S = 1e-6   # whole-run histogram: 1 us bins up to 100 ms (longer steps: last bin)
+_HIST_BINS = 100_000
+
+
+class StepStats:
+    """Step durations [s] in a window (for 1 Hz diagnostics) and over the whole run.
+
+    The whole-run figures come from a fixed 1 us histogram, so memory stays constant however
+    long the run; the mean and the maximum are exact.
+    """
+
+    def __init__(self, window: int = 1000) -> None:
+        self._window = np.zeros(window, dtype=np.float64)
+        self._count = 0
+        self._hist = np.zeros(_HIST_BINS, dtype=np.int64)
+        self._sum = 0.0
+        self._max = 0.0
+
+    def add(self, seconds: float) -> None:
+        """Record one step's duration [s]."""
+        self._window[self._count % self._window.size] = seconds
+        self._count += 1
+        self._hist[min(int(seconds / _HIST_BIN_S), _HIST_BINS - 1)] += 1
+        self._sum += seconds
+        self._max = max(self._max, seconds)
+
+    @staticmethod
+    def _summary(values: np.ndarray) -> Dict[str, float]:
+        if values.size == 0:
+            return {'mean_ms': 0.0, 'p50_ms': 0.0, 'p99_ms': 0.0, 'max_ms': 0.0}
+        ms = values * 1e3
+        return {'mean_ms': float(ms.mean()), 'p50_ms': float(np.median(ms)),
+                'p99_ms': float(np.percentile(ms, 99)), 'max_ms': float(ms.max())}
+
+    def window(self) -> Dict[str, float]:
+        """Mean, median, p99 and max [ms] over the last window of steps."""
+        return self._summary(self._window[:min(self._count, self._window.size)])
+
+    def total(self) -> Dict[str, float]:
+        """Mean, median, p99 and max [ms] over every step recorded (percentiles to 1 us)."""
+        if not self._count:
+            return self._summary(self._window[:0])
+        cumulative = np.cumsum(self._hist)
+
+        def percentile(q: float) -> float:
+            index = int(np.searchsorted(cumulative, q * self._count))
+            return (index + 0.5) * _HIST_BIN_S * 1e3
+
+        return {'mean_ms': self._sum / self._count * 1e3, 'p50_ms': percentile(0.5),
+                'p99_ms': percentile(0.99), 'max_ms': self._max * 1e3}
+
+    @property
+    def count(self) -> int:
+        """Number of steps recorded."""
+        return self._count

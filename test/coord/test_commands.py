@@ -1,0 +1,126 @@
+"""Command validation: invalid commands are rejected with a reason and never queued."""
+
+import math
+
+import pytest
+
+from conveyor_twin.cell import load_cell
+from conveyor_twin.coord.actuation import Actuation
+from conveyor_twin.coord.clock import stamp, step_ns
+from conveyor_twin.coord.commands import CommandBook, CommandRejected
+
+
+@pytest.fixture
+def book() -> CommandBook:
+    return CommandBook(load_cell())
+
+
+@pytest.mark.parametrize('belt, speed, reason, words', [
+    ('nope', 0.1, 'unknown_belt', ["'nope'", 'main']),
+    ('main', math.nan, 'not_finite', ['nan']),
+    ('main', math.inf, 'not_finite', ['inf']),
+    ('main', 2.5, 'out_of_range', ['2.5', '[-2, 2]']),
+    ('main', -2.01, 'out_of_range', ['-2.01']),
+])
+def test_invalid_belt_commands_are_rejected(book: CommandBook, belt: str, speed: float,
+                                            reason: str, words: list) -> None:
+    with pytest.raises(CommandRejected) as info:
+        book.submit_belt(belt, speed)
+    assert all(word in str(info.value) for word in words)
+    assert book.rejected[reason] == 1 and book.rejected_total == 1
+    assert book.drain(1) == []
+
+
+@pytest.mark.parametrize('actuator, position, reason', [
+    ('gripper', 0.1, 'unknown_actuator'),
+    ('pusher', math.nan, 'not_finite'),
+    ('pusher', 0.51, 'out_of_range'),
+    ('pusher', -0.01, 'out_of_range'),
+    ('stopper', 0.009, 'out_of_range'),
+])
+def test_invalid_actuator_commands_are_rejected(book: CommandBook, actuator: str,
+                                                position: float, reason: str) -> None:
+    with pytest.raises(CommandRejected):
+        book.submit_actuator(actuator, position)
+    assert book.rejected == {reason: 1}
+    assert book.drain(1) == []
+
+
+def test_valid_commands_are_stamped_at_the_boundary_in_order(book: CommandBook) -> None:
+    book.submit_belt('main', 1.0)
+    book.submit_actuator('pusher', 0.5)
+    book.submit_belt('main', -2.0)
+    drained = book.drain(7)
+    assert [(c.kind, c.name, c.value, c.step) for c in drained] == [
+        ('belt', 'main', 1.0, 7), ('actuator', 'pusher', 0.5, 7), ('belt', 'main', -2.0, 7)]
+    assert book.drain(8) == []
+
+
+def test_scheduled_commands_come_first_at_their_step(book: CommandBook) -> None:
+    book.schedule(3, book.validate_belt('main', 0.2))
+    book.submit_belt('main', 0.3)
+    assert [c.value for c in book.drain(2)] == [0.3]
+    assert [(c.value, c.step) for c in book.drain(3)] == [(0.2, 3)]
+
+
+def test_belt_ramp_respects_acceleration_and_lands_exactly() -> None:
+    cell = load_cell()
+    act = Actuation(cell)
+    assert act.belt_speed[0] == 0.5
+    act.set_belt_target(0, 1.5)
+    steps = 0
+    while act.belt_speed[0] != 1.5:
+        before = act.belt_speed[0]
+        act.advance()
+        steps += 1
+        assert act.belt_speed[0] - before <= cell.belts[0].acceleration * 1e-3 + 1e-15
+    # 1.0 m/s at 2 m/s^2 takes 0.5 s = 500 steps
+    assert steps == 500
+
+
+def test_actuator_moves_at_max_speed() -> None:
+    cell = load_cell()
+    act = Actuation(cell)
+    index = cell.actuator_index('pusher')
+    act.set_actuator_target(index, 0.4)
+    for _ in range(250):
+        act.advance()
+    assert act.actuator_position[index] == pytest.approx(0.8 * 0.25)
+    for _ in range(250):
+        act.advance()
+    assert act.actuator_position[index] == 0.4
+
+
+def test_clock_is_exact_integers() -> None:
+    assert step_ns(1e-3) == 1_000_000
+    assert stamp(123 * 1_000_000) == (0, 123_000_000)
+    assert stamp(2_500_000_000) == (2, 500_000_000)
+    with pytest.raises(ValueError):
+        step_ns(1.5e-10)
+
+
+def test_step_stats_window_and_total() -> None:
+    from conveyor_twin.coord.timing import StepStats
+    stats = StepStats(window=10)
+    for i in range(100):
+        stats.add((i + 1) * 1e-5)  # 0.01 .. 1.0 ms
+    window = stats.window()
+    assert window['max_ms'] == pytest.approx(1.0) and window['mean_ms'] == pytest.approx(0.955)
+    total = stats.total()
+    assert total['mean_ms'] == pytest.approx(0.505)
+    assert total['max_ms'] == pytest.approx(1.0)
+    assert abs(total['p50_ms'] - 0.5) <= 0.011 and abs(total['p99_ms'] - 0.99) <= 0.011
+
+
+def test_deadline_pacer_counts_overruns_without_skipping() -> None:
+    import time
+    from conveyor_twin.coord.timing import DeadlinePacer
+    pacer = DeadlinePacer(1_000_000)
+    time.sleep(0.0035)  # the first step takes 3.5 periods
+    pacer.wait_next()
+    assert pacer.overruns == 1
+    pacer.wait_next()  # deadlines 2 and 3 are already past: no sleep, each counted
+    pacer.wait_next()
+    assert pacer.overruns == 3
+    pacer.wait_next()  # deadline 4 lies ahead: sleeps until it
+    assert time.monotonic_ns() >= pacer.start_ns + 4_000_000
