@@ -1,0 +1,104 @@
+"""The stepping thread: realtime on absolute deadlines, or as fast as possible.
+
+Lockstep needs no thread: whoever asks (the ``step`` service, a test) calls :meth:`Runner.step`.
+Every step's duration (the twin's step and everything its listeners do, e.g. publishing) is
+recorded in :attr:`Runner.stats`; in realtime a step that ends after its deadline is an overrun.
+"""
+
+import threading
+import time
+from typing import Callable, Optional
+
+from conveyor_twin.coord.timing import DeadlinePacer, StepStats, TimeMode
+from conveyor_twin.coord.twin import Twin
+
+
+class Runner:
+    """Advance a :class:`Twin` according to a :class:`TimeMode`.
+
+    :param twin: the twin to step.
+    :param mode: realtime, fast or lockstep.
+    :param max_steps: stop after this many steps (None: until :meth:`stop`).
+    :param on_error: called with the exception if a step raises; the thread then stops.
+    """
+
+    def __init__(self, twin: Twin, mode: TimeMode, *, max_steps: Optional[int] = None,
+                 on_error: Optional[Callable[[BaseException], None]] = None) -> None:
+        self.twin = twin
+        self.mode = TimeMode(mode)
+        self.max_steps = max_steps
+        self.stats = StepStats()
+        self.pacer = DeadlinePacer(twin.dt_ns)
+        self.steps_done = 0
+        self.error: Optional[BaseException] = None
+        self._on_error = on_error
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self.wall_start = 0.0
+        self.wall_end = 0.0
+
+    @property
+    def overruns(self) -> int:
+        """Realtime steps that ended after their deadline."""
+        return self.pacer.overruns
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` steps now, timing each (lockstep and tests)."""
+        for _ in range(n):
+            start = time.perf_counter()
+            self.twin.step(1)
+            self.stats.add(time.perf_counter() - start)
+            self.steps_done += 1
+
+    def start(self) -> None:
+        """Start the stepping thread (realtime or fast); lockstep does nothing."""
+        self.wall_start = time.monotonic()
+        if self.mode is TimeMode.LOCKSTEP:
+            return
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._loop, name='conveyor_twin_steps',
+                                        daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:
+        realtime = self.mode is TimeMode.REALTIME
+        self.pacer.restart()
+        try:
+            while not self._stop.is_set():
+                if self.max_steps is not None and self.steps_done >= self.max_steps:
+                    break
+                self.step(1)
+                if realtime:
+                    self.pacer.wait_next()
+        except BaseException as exc:  # reported, never swallowed silently
+            self.error = exc
+            if self._on_error is not None:
+                self._on_error(exc)
+        finally:
+            self.wall_end = time.monotonic()
+            self._stop.set()
+
+    @property
+    def running(self) -> bool:
+        """True while the stepping thread runs."""
+        return self._thread is not None and self._thread.is_alive()
+
+    def wait(self, timeout: Optional[float] = None) -> bool:
+        """Wait until the thread has stopped; return True if it has."""
+        if self._thread is None:
+            return True
+        self._thread.join(timeout)
+        return not self._thread.is_alive()
+
+    def stop(self) -> None:
+        """Stop the stepping thread after the current step."""
+        self._stop.set()
+        self.wait(10.0)
+        if not self.wall_end:
+            self.wall_end = time.monotonic()
+
+    def real_time_factor(self) -> float:
+        """Simulated time over wall time since :meth:`start`."""
+        end = self.wall_end if self.wall_end else time.monotonic()
+        wall = end - self.wall_start
+        return self.steps_done * self.twin.dt_ns * 1e-9 / wall if wall > 0 else 0.0

@@ -1,0 +1,107 @@
+"""The coordinator core: owns simulation time, commands and actuation, and steps the scales.
+
+Each step ``k`` (the state after it is stamped ``k * dt``):
+1. the commands that arrived since step ``k - 1`` are drained, stamped ``k`` and applied to the
+   belt and actuator targets (:class:`~conveyor_twin.coord.commands.CommandBook`);
+2. belt speeds and actuator positions move one step toward their targets;
+3. one :class:`~conveyor_twin.coord.step_input.StepInput` is built and every local stage
+   advances with it (remote stages get its bytes; see ``conveyor_twin.ros``).
+"""
+
+import threading
+from typing import Callable, List, Optional, Protocol, Sequence
+
+from conveyor_twin.cell.model import Cell
+from conveyor_twin.coord.actuation import Actuation
+from conveyor_twin.coord.clock import step_ns
+from conveyor_twin.coord.commands import ACTUATOR, BELT, Command, CommandBook
+from conveyor_twin.coord.step_input import StepInput
+
+
+class Stage(Protocol):
+    """One scale's core behind a uniform per-step interface."""
+
+    def advance(self, inp: StepInput) -> None:
+        """Advance one step with the coordinator's inputs."""
+
+    def reset(self, cell: Cell, seed: int) -> None:
+        """Restart from the cell's initial state."""
+
+
+class Twin:
+    """Time, commands, actuation and the stages of one cell.
+
+    :param cell: the validated cell.
+    :param seed: random seed of the run (sources).
+    :param stages: the stages stepped in this process, in order.
+    """
+
+    def __init__(self, cell: Cell, *, seed: int, stages: Sequence[Stage] = ()) -> None:
+        self.lock = threading.RLock()
+        self.stages: List[Stage] = list(stages)
+        self.step_listeners: List[Callable[[StepInput, List[Command]], None]] = []
+        self._last_commands: List[Command] = []
+        self.commands = CommandBook(cell)
+        self._load(cell, seed)
+
+    def _load(self, cell: Cell, seed: int) -> None:
+        self.cell = cell
+        self.seed = seed
+        self.dt_ns = step_ns(cell.settings.step)
+        self.commands.clear()
+        self.actuation = Actuation(cell)
+        self.step_index = 0
+
+    def rebind(self, cell: Cell) -> None:
+        """Use ``cell``'s names and ranges for command validation (after a reset)."""
+        rejected = self.commands.rejected
+        self.commands = CommandBook(cell)
+        self.commands.rejected = rejected
+
+    @property
+    def time_ns(self) -> int:
+        """Simulation time of the current state [ns]."""
+        return self.step_index * self.dt_ns
+
+    def reset(self, cell: Optional[Cell] = None, seed: Optional[int] = None) -> None:
+        """Restart at step 0, optionally with another cell and/or seed; counters of rejected
+        commands are kept for the process's diagnostics."""
+        with self.lock:
+            cell = cell or self.cell
+            seed = self.seed if seed is None else seed
+            if cell is not self.cell:
+                self.rebind(cell)
+            self._load(cell, seed)
+            for stage in self.stages:
+                stage.reset(cell, seed)
+
+    def _apply(self, commands: List[Command]) -> None:
+        for command in commands:
+            if command.kind == BELT:
+                self.actuation.set_belt_target(command.index, command.value)
+            elif command.kind == ACTUATOR:
+                self.actuation.set_actuator_target(command.index, command.value)
+
+    def prepare(self) -> StepInput:
+        """Drain and apply commands, move the actuation, and return the next step's input."""
+        step = self.step_index + 1
+        commands = self.commands.drain(step)
+        self._apply(commands)
+        self.actuation.advance()
+        inp = StepInput(step, step * self.dt_ns, self.actuation.belt_speed.copy(),
+                        self.actuation.actuator_position.copy())
+        self._last_commands = commands
+        return inp
+
+    def step(self, n: int = 1) -> StepInput:
+        """Advance ``n`` steps with the local stages; return the last step's input."""
+        inp = None
+        with self.lock:
+            for _ in range(n):
+                inp = self.prepare()
+                for stage in self.stages:
+                    stage.advance(inp)
+                self.step_index = inp.step
+                for listener in self.step_listeners:
+                    listener(inp, self._last_commands)
+        return inp
