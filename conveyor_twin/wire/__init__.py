@@ -1,0 +1,1 @@
+"""Wire formats of the twin without ROS: CDR from numpy, ros2msg schemas, RIHS01 type hashes."""

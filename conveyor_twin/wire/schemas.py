@@ -1,0 +1,315 @@
+"""ros2msg definition texts of the contract types and their dependencies, as rosbag2 stores them.
+
+A schema in a rosbag2 MCAP file (schema encoding ``ros2msg``) is the text of the root ``.msg``
+file followed, for every type it depends on (depth first, each type once), by a separator line of
+80 ``=``, a line ``MSG: pkg/Type`` and that type's ``.msg`` text. :func:`full_text` builds that
+concatenation; :data:`SCHEMAS` holds it for every type the twin records.
+
+The ``conveyor_twin_msgs`` texts equal ``msg_defs/msg/*.msg`` (a test checks it); the texts of
+the standard types are those of the Kilted message packages.
+"""
+
+import re
+from typing import Dict, List, Tuple
+
+#: Separator between the definitions of a concatenated ros2msg schema (rosbag2, mcap).
+SEPARATOR = '=' * 80
+
+_PARTSTATES = (
+    '# Pose and velocity of every micro-simulated part at one simulation step, in the cell frame\n'
+    '# (x along the main conveying direction, y to the left, z up; REP-103).\n'
+    '# Structure of arrays: entry i of every array describes the same part; equal lengths.\n'
+    '\n'
+    'std_msgs/Header header  # stamp: simulation time of the step; frame_id: cell frame\n'
+    'uint64 step             # simulation step index [1] (0 = state after reset)\n'
+    'uint32[] id             # unique part id [1] (never 0, never reused within a run)\n'
+    'uint16[] part_type      # index of the part type in the cell description [1]\n'
+    "float64[] x             # position of the part's centre of mass in the cell frame [m]\n"
+    "float64[] y             # position of the part's centre of mass in the cell frame [m]\n"
+    'float64[] yaw           # orientation about +z in the cell frame [rad]\n'
+    'float64[] vx            # linear velocity along x of the cell frame [m/s]\n'
+    'float64[] vy            # linear velocity along y of the cell frame [m/s]\n'
+    'float64[] wz            # angular velocity about +z [rad/s]\n'
+)
+
+_DENSITYGRID = (
+    '# Macro-scale part density on the grid of one macro zone at one simulation step.\n'
+    '\n'
+    'std_msgs/Header header  # stamp: simulation time of the step; frame_id: cell frame\n'
+    'uint64 step             # simulation step index [1]\n'
+    'string zone             # name of the zone in the cell description\n'
+    'float64 origin_x        # cell-frame x of the grid origin, corner of cell (ix=0, iy=0) [m]\n'
+    'float64 origin_y        # cell-frame y of the grid origin, corner of cell (ix=0, iy=0) [m]\n'
+    'float64 resolution      # edge length of the square grid cells [m]\n'
+    'uint32 nx               # number of cells along x [1]\n'
+    'uint32 ny               # number of cells along y [1]\n'
+    'float32[] density       # areal part density, row-major, index'
+    ' iy*nx+ix, length nx*ny [parts/m^2]\n'
+    'float64 total_parts     # integral of density over the grid [parts]\n'
+)
+
+_LIGHTBARRIERSTATES = (
+    '# State of every light barrier at one simulation step (arrays indexed alike).\n'
+    '\n'
+    'std_msgs/Header header  # stamp: simulation time of the step; frame_id: cell frame\n'
+    'uint64 step             # simulation step index\n'
+    'string[] name           # light barrier name from the cell description\n'
+    'bool[] blocked          # true while the beam is interrupted\n'
+    'uint32[] edge_count     # number of edges (both directions) since the last reset\n'
+)
+
+_LIGHTBARRIEREDGE = (
+    "# One change of a light barrier's state.\n"
+    '\n'
+    'std_msgs/Header header  # stamp: interpolated simulation time of the'
+    ' edge; frame_id: cell frame\n'
+    'string name             # light barrier name from the cell description\n'
+    'bool blocked            # true: the beam became interrupted; false: the beam became free\n'
+    'uint32 part_id          # id of the micro part causing the edge [1];'
+    ' 0: edge from the macro scale\n'
+)
+
+_BELTCOMMAND = (
+    "# Set the target speed of one belt (applied ramped by the belt's acceleration limit).\n"
+    '\n'
+    'string belt     # belt name from the cell description\n'
+    "float64 speed   # target surface speed along the belt's conveying direction [m/s]\n"
+)
+
+_BELTSTATES = (
+    '# Commanded and actual speed of every belt (arrays indexed alike).\n'
+    '\n'
+    'std_msgs/Header header        # stamp: simulation time of the step; frame_id: cell frame\n'
+    'string[] name                 # belt name from the cell description\n'
+    "float64[] commanded_speed     # last accepted target speed along the belt's direction [m/s]\n"
+    "float64[] speed               # actual surface speed along the belt's direction [m/s]\n"
+)
+
+_ACTUATORCOMMAND = (
+    '# Set the target position of one actuator (pusher, stopper, diverter).\n'
+    '\n'
+    'string actuator     # actuator name from the cell description\n'
+    "float64 position    # target position in the actuator's own unit [m]"
+    ' for linear, [rad] for rotary\n'
+)
+
+_ACTUATORSTATES = (
+    '# Commanded and actual position of every actuator (arrays indexed alike).\n'
+    '\n'
+    'std_msgs/Header header          # stamp: simulation time of the step; frame_id: cell frame\n'
+    'string[] name                   # actuator name from the cell description\n'
+    'float64[] commanded_position    # last accepted target position [m]'
+    ' for linear, [rad] for rotary\n'
+    'float64[] position              # actual position [m] for linear, [rad] for rotary\n'
+)
+
+_HEADER = (
+    '# Standard metadata for higher-level stamped data types.\n'
+    '# This is generally used to communicate timestamped data\n'
+    '# in a particular coordinate frame.\n'
+    '\n'
+    '# Two-integer timestamp that is expressed as seconds and nanoseconds.\n'
+    'builtin_interfaces/Time stamp\n'
+    '\n'
+    '# Transform frame with which this data is associated.\n'
+    'string frame_id\n'
+)
+
+_TIME = (
+    '# This message communicates ROS Time defined here:\n'
+    '# https://design.ros2.org/articles/clock_and_time.html\n'
+    '\n'
+    '# The seconds component, valid over all int32 values.\n'
+    'int32 sec\n'
+    '\n'
+    '# The nanoseconds component, valid in the range [0, 1e9).\n'
+    'uint32 nanosec\n'
+)
+
+_CLOCK = (
+    '# This message communicates the current time.\n'
+    '#\n'
+    '# For more information, see https://design.ros2.org/articles/clock_and_time.html.\n'
+    'builtin_interfaces/Time clock\n'
+)
+
+_DIAGNOSTICARRAY = (
+    '# This message is used to send diagnostic information about the state of the robot.\n'
+    'std_msgs/Header header # for timestamp\n'
+    'DiagnosticStatus[] status # an array of components being reported on\n'
+)
+
+_DIAGNOSTICSTATUS = (
+    '# This message holds the status of an individual component of the robot.\n'
+    '\n'
+    '# Possible levels of operations.\n'
+    'byte OK=0\n'
+    'byte WARN=1\n'
+    'byte ERROR=2\n'
+    'byte STALE=3\n'
+    '\n'
+    '# Level of operation enumerated above.\n'
+    'byte level\n'
+    '# A description of the test/component reporting.\n'
+    'string name\n'
+    '# A description of the status.\n'
+    'string message\n'
+    '# A hardware unique string.\n'
+    'string hardware_id\n'
+    '# An array of values associated with the status.\n'
+    'KeyValue[] values\n'
+    '\n'
+)
+
+_KEYVALUE = (
+    '# What to label this value when viewing.\n'
+    'string key\n'
+    '# A value to track over time.\n'
+    'string value\n'
+)
+
+#: ``.msg`` text of every known type, by full type name (``pkg/msg/Type``).
+MSG_TEXTS: Dict[str, str] = {
+    'conveyor_twin_msgs/msg/PartStates': _PARTSTATES,
+    'conveyor_twin_msgs/msg/DensityGrid': _DENSITYGRID,
+    'conveyor_twin_msgs/msg/LightBarrierStates': _LIGHTBARRIERSTATES,
+    'conveyor_twin_msgs/msg/LightBarrierEdge': _LIGHTBARRIEREDGE,
+    'conveyor_twin_msgs/msg/BeltCommand': _BELTCOMMAND,
+    'conveyor_twin_msgs/msg/BeltStates': _BELTSTATES,
+    'conveyor_twin_msgs/msg/ActuatorCommand': _ACTUATORCOMMAND,
+    'conveyor_twin_msgs/msg/ActuatorStates': _ACTUATORSTATES,
+    'std_msgs/msg/Header': _HEADER,
+    'builtin_interfaces/msg/Time': _TIME,
+    'rosgraph_msgs/msg/Clock': _CLOCK,
+    'diagnostic_msgs/msg/DiagnosticArray': _DIAGNOSTICARRAY,
+    'diagnostic_msgs/msg/DiagnosticStatus': _DIAGNOSTICSTATUS,
+    'diagnostic_msgs/msg/KeyValue': _KEYVALUE,
+}
+
+#: Type names of the interface package of the contract.
+CONTRACT_TYPES: Tuple[str, ...] = tuple(
+    name for name in MSG_TEXTS if name.startswith('conveyor_twin_msgs/'))
+
+PRIMITIVES = frozenset((
+    'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16', 'int32',
+    'uint32', 'int64', 'uint64', 'string', 'wstring'))
+
+_ARRAY = re.compile(r'\[(<=)?(\d*)\]$')
+_BOUNDED_STRING = re.compile(r'^(w?string)<=(\d+)$')
+
+
+class Field:
+    """One field of a ``.msg`` definition (constants are not fields)."""
+
+    __slots__ = ('name', 'base', 'array', 'capacity', 'string_capacity')
+
+    def __init__(self, name: str, base: str, array: str, capacity: int,
+                 string_capacity: int) -> None:
+        """Describe a field.
+
+        :param name: field name.
+        :param base: primitive name (``float64``, ``string``) or full type name
+            (``pkg/msg/Type``) of a nested type.
+        :param array: ``''`` (single value), ``'fixed'``, ``'bounded'`` or ``'unbounded'``.
+        :param capacity: array size (fixed) or upper bound (bounded), else 0.
+        :param string_capacity: upper bound of a bounded string, else 0.
+        """
+        self.name = name
+        self.base = base
+        self.array = array
+        self.capacity = capacity
+        self.string_capacity = string_capacity
+
+    def __repr__(self) -> str:
+        return f'Field({self.name!r}, {self.base!r}, {self.array!r}, {self.capacity})'
+
+
+def parse_fields(type_name: str, text: str) -> List[Field]:
+    """Return the fields of a ``.msg`` text, in order, without constants and comments.
+
+    :param type_name: full name of the type the text defines (``pkg/msg/Type``), to resolve
+        package-relative nested types.
+    :param text: ``.msg`` text.
+    :raises ValueError: on a line that is not a field or constant definition.
+    """
+    package = type_name.split('/')[0]
+    fields = []
+    for raw in text.splitlines():
+        line = raw.split('#', 1)[0].strip()
+        if not line:
+            continue
+        parts = line.split(None, 1)
+        if len(parts) != 2:
+            raise ValueError(f'{type_name}: cannot parse line {raw!r}')
+        ftype, rest = parts
+        rest = rest.strip()
+        if '=' in rest.split()[0] or (len(rest.split()) > 1 and rest.split()[1].startswith('=')):
+            continue  # constant
+        name = rest.split()[0]
+        array, capacity = '', 0
+        match = _ARRAY.search(ftype)
+        if match:
+            ftype = ftype[:match.start()]
+            if match.group(1):
+                array, capacity = 'bounded', int(match.group(2))
+            elif match.group(2):
+                array, capacity = 'fixed', int(match.group(2))
+            else:
+                array = 'unbounded'
+        string_capacity = 0
+        bounded = _BOUNDED_STRING.match(ftype)
+        if bounded:
+            ftype, string_capacity = bounded.group(1), int(bounded.group(2))
+        if ftype in PRIMITIVES:
+            base = ftype
+        elif '/' in ftype:
+            pkg, name_ = ftype.split('/')[0], ftype.split('/')[-1]
+            base = f'{pkg}/msg/{name_}'
+        else:
+            base = f'{package}/msg/{ftype}'
+        fields.append(Field(name, base, array, capacity, string_capacity))
+    return fields
+
+
+def dependencies(type_name: str) -> List[str]:
+    """Return the nested types of a type in the order rosbag2 concatenates them.
+
+    rosbag2 (``rosbag2_storage_mcap``) visits the dependencies of each type sorted by name,
+    depth first, each type once.
+
+    :param type_name: full type name (``pkg/msg/Type``) present in :data:`MSG_TEXTS`.
+    """
+    seen: List[str] = []
+
+    def visit(name: str) -> None:
+        nested = sorted({f.base for f in parse_fields(name, MSG_TEXTS[name])} - PRIMITIVES,
+                        key=_short_name)
+        for dep in nested:
+            if dep not in seen:
+                seen.append(dep)
+                visit(dep)
+
+    visit(type_name)
+    return seen
+
+
+def _short_name(type_name: str) -> str:
+    """Return ``pkg/Type`` for ``pkg/msg/Type``."""
+    pkg, _, name = type_name.split('/')
+    return f'{pkg}/{name}'
+
+
+def full_text(type_name: str) -> str:
+    """Return the concatenated ros2msg schema text of a type, as rosbag2 writes it.
+
+    :param type_name: full type name (``pkg/msg/Type``) present in :data:`MSG_TEXTS`.
+    :raises KeyError: for an unknown type.
+    """
+    text = MSG_TEXTS[type_name]
+    for dep in dependencies(type_name):
+        text += f'\n{SEPARATOR}\nMSG: {_short_name(dep)}\n{MSG_TEXTS[dep]}'
+    return text
+
+
+#: Concatenated schema text of every known type, by full type name.
+SCHEMAS: Dict[str, str] = {name: full_text(name) for name in MSG_TEXTS}
