@@ -225,8 +225,9 @@ def _scan(mm, report: ScanReport) -> Iterator[ScanMessage]:
                 cursor.u64()
                 name, media_type = cursor.string(), cursor.string()
                 data = cursor.raw(cursor.u64())
+                covered = bytes(mm[pos + 9:cursor.pos])  # the CRC covers all fields before it
                 crc = cursor.u32()
-                if crc and zlib.crc32(data) != crc:
+                if crc and zlib.crc32(covered) != crc:
                     raise Corrupt(f'attachment {name!r} fails its CRC')
                 report.attachments.append((name, media_type, data))
             elif opcode == 0x0C:

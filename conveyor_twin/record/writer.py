@@ -152,6 +152,10 @@ class McapRecorder:
         self.compression = compression if compression != '' else 'none'
         self._flush_period = flush_period
         self._flush_sim = flush_sim_period_ns
+        # flush deadlines a poll period early, so that wake-up jitter keeps the spacing of the
+        # flushes within flush_period
+        self._flush_spacing = max(flush_period - POLL_PERIOD, flush_period / 2) \
+            if flush_period else 0.0
         self._queue_size = queue_size
         self._selection = None if topics is None else frozenset(topics)
         self._decimation = dict(decimation or {})
@@ -165,6 +169,7 @@ class McapRecorder:
         self._closed = False
         self._error: Optional[BaseException] = None
         self._schema_ids: Dict[str, int] = {}
+        self._sim_mark: Optional[int] = None
         self._by_index: List[_Topic] = []
         self.stats = RecorderStats(self.path)
         self._info = {'version': __version__, 'library': LIBRARY,
@@ -281,10 +286,10 @@ class McapRecorder:
                     'topic_type_hash': type_hash(t.type_name)}
         t.channel_id = self._file.add_channel(t.name, MessageEncoding.CDR, schema_id, metadata)
 
-    def _drain(self) -> Optional[int]:
-        """Write every queued item; return the last log time written (None if none)."""
+    def _drain(self) -> None:
+        """Write every queued item; close a chunk whenever simulation time crossed a period."""
         queue, by_index, add = self._queue, self._by_index, self._file.add_message
-        last = None
+        sim_period = self._flush_sim
         while queue:
             item = queue.popleft()
             index = item[0]
@@ -292,33 +297,27 @@ class McapRecorder:
                 self._register(item[1])
                 continue
             t = by_index[index]
-            last = item[1]
-            add(t.channel_id, item[3], last, last, item[2])
+            log_time = item[1]
+            if sim_period is not None:
+                if self._sim_mark is None:
+                    self._sim_mark = log_time
+                elif log_time - self._sim_mark >= sim_period:
+                    self._file.flush()
+                    self._sim_mark = log_time
+            add(t.channel_id, item[3], log_time, log_time, item[2])
             t.stats.recorded += 1
-        return last
 
     def _run(self) -> None:
-        now = time.monotonic()
-        next_flush = now + self._flush_period if self._flush_period else float('inf')
-        sim_flushed: Optional[int] = None
+        next_flush = time.monotonic() + self._flush_spacing if self._flush_period \
+            else float('inf')
         try:
             while True:
                 closing = self._closing
-                last = self._drain()
-                flush = False
+                self._drain()
                 now = time.monotonic()
                 if now >= next_flush:
-                    flush = True
-                    next_flush = now + self._flush_period
-                if self._flush_sim is not None and last is not None:
-                    if sim_flushed is None:
-                        sim_flushed = last
-                    elif last - sim_flushed >= self._flush_sim:
-                        flush = True
-                if flush:
                     self._file.flush()
-                    if last is not None:
-                        sim_flushed = last
+                    next_flush = now + self._flush_spacing
                 if closing and not self._queue:
                     break
                 self._wake.wait(min(POLL_PERIOD, max(0.0, next_flush - now)))
@@ -390,7 +389,7 @@ def bag_metadata_yaml(file_name: str, start_ns: int, end_ns: int, message_count:
         'topics_with_message_count': [
             {'topic_metadata': {'name': name, 'type': type_name, 'serialization_format': 'cdr',
                                 'offered_qos_profiles': [qos_mod.profile_dict(q)],
-                                'type_description_hash': type_hash(type_name)},
+                                'type_description_hash': _hash_or_empty(type_name)},
              'message_count': count}
             for name, type_name, q, count in topics],
         'compression_format': '',
@@ -402,6 +401,13 @@ def bag_metadata_yaml(file_name: str, start_ns: int, end_ns: int, message_count:
         'ros_distro': ROS_DISTRO,
     }
     return yaml.safe_dump(node, sort_keys=False)
+
+
+def _hash_or_empty(type_name: str) -> str:
+    try:
+        return type_hash(type_name)
+    except KeyError:
+        return ''
 
 
 def _cell_name(cell_yaml: Optional[str]) -> str:
