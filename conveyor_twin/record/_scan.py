@@ -23,6 +23,8 @@ _U64 = struct.Struct('<Q')
 _MESSAGE = struct.Struct('<HIQQ')
 _CHUNK = struct.Struct('<QQQI')
 _KNOWN = frozenset(range(0x01, 0x10))
+_NAMES = {0x01: 'header', 0x03: 'schema', 0x04: 'channel', 0x05: 'message', 0x06: 'chunk',
+          0x09: 'attachment', 0x0C: 'metadata'}
 
 
 class Corrupt(Exception):
@@ -233,7 +235,8 @@ def _scan(mm, report: ScanReport) -> Iterator[ScanMessage]:
             elif opcode == 0x0C:
                 report.metadata.append((cursor.string(), cursor.string_map()))
         except Corrupt as err:
-            report.damaged.append((pos, f'record 0x{opcode:02x}: {err}'))
+            name = _NAMES.get(opcode, f'record 0x{opcode:02x}')
+            report.damaged.append((pos, f'{name}: {err}'))
         pos = end
         yield from messages
 
