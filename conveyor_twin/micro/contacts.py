@@ -1,0 +1,413 @@
+"""Contact response kernels: impulses (seed 000) or penalty spring-dampers (seed 001).
+
+Impulse model: one algebraic impulse per contact point, no iteration. With the relative
+velocity ``u`` of A against B at the contact and the unit normal ``n`` pointing to A:
+``j = -(1 + e) u_n / (1/m_a + 1/m_b + (r_a x n)^2 / I_a + (r_b x n)^2 / I_b)`` when ``u_n < 0``;
+then a tangential impulse that would stop the sliding, clamped to ``mu(|u_t|) j`` (Coulomb,
+seed 002's speed-dependent coefficient: static at rest, sliding above the transition speed,
+linear in between). Restitution acts only above :data:`RESTITUTION_THRESHOLD` so resting
+contacts (a part pressed on a wall by the belt) do not chatter. Overlap beyond the slop is
+removed by moving the bodies apart along ``n`` (in inverse-mass proportion) every substep.
+
+Penalty model: a spring-damper per contact point, ``f_n = max(0, k d - c u_n)``, and a Coulomb
+friction force ``min(mu f_n, |u_t| / (k_t dt))`` against the sliding (the second term stops it
+within one substep without reversing it); no position correction.
+
+Pairs are resolved in a canonical order whatever the broad phase: all part pairs (i, j), i < j,
+lexicographically, then every part against the static shapes (ascending index) and then the
+actuators. :mod:`conveyor_twin.micro.reference` does the same in plain Python.
+"""
+
+import math
+
+from numba import njit
+import numpy as np
+
+from conveyor_twin.micro.collide import box_vertices, circle_circle, collide
+from conveyor_twin.micro.state import (PT_BRAD, PT_E, PT_HL, PT_HW, PT_INV_INERTIA,
+                                       PT_INV_MASS, PT_MU_K, PT_MU_S, PT_RADIUS, PT_SHAPE,
+                                       PT_V_T, SHAPE_DISC)
+
+# Below this approach speed [m/s] a contact is treated as plastic (no bounce).
+RESTITUTION_THRESHOLD = 0.02
+
+MODE_IMPULSE = 0
+MODE_PENALTY = 1
+
+# --- model parameter slots (float64 array ``mp``) ---
+MP_SLOP = 0           # penetration left uncorrected [m]
+MP_CORRECTION = 1     # fraction of the excess penetration removed per substep
+MP_STIFFNESS = 2      # penalty spring [N/m]
+MP_DAMPING = 3        # penalty damper [N s/m]
+MP_DT = 4             # substep [s]
+MP_GRAVITY = 5        # [m/s^2]
+MP_FLOOR_MU = 6       # friction coefficient off the belts
+MP_TRACK = 7          # 1.0: accumulate activities
+MP_COLUMNS = 8
+
+# --- activity slots [J] (seed 001: integral of |power| dt per element class) ---
+A_SPRING = 0
+A_DAMPER = 1
+A_CONTACT_FRICTION = 2
+A_BELT = 3
+A_INERTIA = 4
+A_COLUMNS = 5
+
+# --- static shape table columns (float64, one row per shape) ---
+SH_NV = 0
+SH_OFF = 1
+SH_R = 2
+SH_E = 3
+SH_MU = 4
+SH_XMIN = 5
+SH_YMIN = 6
+SH_XMAX = 7
+SH_YMAX = 8
+SH_COLUMNS = 9
+
+# --- actuator state columns (float64, one row per actuator, rewritten every substep) ---
+AS_ACTIVE = 0
+AS_NV = 1
+AS_R = 2
+AS_VX = 3             # translation velocity [m/s]
+AS_VY = 4
+AS_W = 5              # angular velocity about the pivot [rad/s]
+AS_PX = 6             # pivot [m]
+AS_PY = 7
+AS_E = 8
+AS_MU = 9
+AS_XMIN = 10
+AS_YMIN = 11
+AS_XMAX = 12
+AS_YMAX = 13
+AS_COLUMNS = 14
+
+
+@njit(cache=True)
+def friction_coefficient(mu_s, mu_k, v_t, speed):
+    """Return seed 002's friction coefficient at tangential ``speed`` [m/s]."""
+    if speed >= v_t:
+        return mu_k
+    return mu_s + (mu_k - mu_s) * (speed / v_t)
+
+
+@njit(cache=True)
+def impulse_response(vax, vay, wa, ima, iia, rax, ray, vbx, vby, wb, imb, iib, rbx, rby,
+                     nx, ny, e, mu_s, mu_k, v_t):
+    """Return the velocities after one contact's impulses and the impulses themselves.
+
+    :param vax: velocity of A [m/s]; ``wa`` its angular velocity [rad/s].
+    :param ima: inverse mass of A [1/kg] (0: kinematic); ``iia`` inverse inertia.
+    :param rax: contact point relative to A's centre (or pivot) [m]. Same for B.
+    :param nx: unit normal pointing to A.
+    :param e: restitution; ``mu_s``, ``mu_k``, ``v_t``: friction law.
+    :return: (vax, vay, wa, vbx, vby, wb, j_n [N s], j_t [N s], u_t before friction [m/s]).
+    """
+    ux = (vax - wa * ray) - (vbx - wb * rby)
+    uy = (vay + wa * rax) - (vby + wb * rbx)
+    un = ux * nx + uy * ny
+    if un >= 0.0:
+        return vax, vay, wa, vbx, vby, wb, 0.0, 0.0, 0.0
+    rna = rax * ny - ray * nx
+    rnb = rbx * ny - rby * nx
+    kn = ima + imb + iia * rna * rna + iib * rnb * rnb
+    ee = e if -un > RESTITUTION_THRESHOLD else 0.0
+    jn = -(1.0 + ee) * un / kn
+    vax += jn * nx * ima
+    vay += jn * ny * ima
+    wa += iia * rna * jn
+    vbx -= jn * nx * imb
+    vby -= jn * ny * imb
+    wb -= iib * rnb * jn
+    tx = -ny
+    ty = nx
+    ux = (vax - wa * ray) - (vbx - wb * rby)
+    uy = (vay + wa * rax) - (vby + wb * rbx)
+    ut = ux * tx + uy * ty
+    rta = rax * ty - ray * tx
+    rtb = rbx * ty - rby * tx
+    kt = ima + imb + iia * rta * rta + iib * rtb * rtb
+    jt = -ut / kt
+    limit = friction_coefficient(mu_s, mu_k, v_t, abs(ut)) * jn
+    if jt > limit:
+        jt = limit
+    elif jt < -limit:
+        jt = -limit
+    vax += jt * tx * ima
+    vay += jt * ty * ima
+    wa += iia * rta * jt
+    vbx -= jt * tx * imb
+    vby -= jt * ty * imb
+    wb -= iib * rtb * jt
+    return vax, vay, wa, vbx, vby, wb, jn, jt, ut
+
+
+@njit(cache=True)
+def penalty_force(vax, vay, wa, ima, iia, rax, ray, vbx, vby, wb, imb, iib, rbx, rby,
+                  nx, ny, depth, k, c, dt, mu_s, mu_k, v_t):
+    """Return the contact force on A [N] and the powers of its spring, damper and friction [W].
+
+    :param depth: penetration [m]; ``k`` spring [N/m], ``c`` damper [N s/m], ``dt`` substep [s].
+    :return: (f_x, f_y, p_spring, p_damper, p_friction); B feels the opposite force.
+    """
+    ux = (vax - wa * ray) - (vbx - wb * rby)
+    uy = (vay + wa * rax) - (vby + wb * rbx)
+    un = ux * nx + uy * ny
+    fs = k * depth
+    fn = fs - c * un
+    if fn <= 0.0:
+        return 0.0, 0.0, abs(fs * un), 0.0, 0.0
+    tx = -ny
+    ty = nx
+    ut = ux * tx + uy * ty
+    rta = rax * ty - ray * tx
+    rtb = rbx * ty - rby * tx
+    kt = ima + imb + iia * rta * rta + iib * rtb * rtb
+    ft = friction_coefficient(mu_s, mu_k, v_t, abs(ut)) * fn
+    stick = abs(ut) / (kt * dt)
+    if stick < ft:
+        ft = stick
+    if ut > 0.0:
+        ft = -ft
+    return (fn * nx + ft * tx, fn * ny + ft * ty, abs(fs * un), abs(c * un * un),
+            abs(ft * ut))
+
+
+@njit(cache=True)
+def part_shape(pt, t, x, y, yaw, verts):
+    """Fill ``verts`` with the core of a part; return (number of vertices, radius [m])."""
+    if pt[t, PT_SHAPE] == SHAPE_DISC:
+        verts[0, 0] = x
+        verts[0, 1] = y
+        return 1, pt[t, PT_RADIUS]
+    box_vertices(x, y, yaw, pt[t, PT_HL], pt[t, PT_HW], verts)
+    return 4, 0.0
+
+
+@njit(cache=True)
+def _pair(i, j, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode, va, vb, out, acc):
+    ti = ptype[i]
+    tj = ptype[j]
+    if pt[ti, PT_SHAPE] == SHAPE_DISC and pt[tj, PT_SHAPE] == SHAPE_DISC:
+        count = circle_circle(x[i], y[i], pt[ti, PT_RADIUS], x[j], y[j], pt[tj, PT_RADIUS], out)
+    else:
+        na, ra = part_shape(pt, ti, x[i], y[i], yaw[i], va)
+        nb, rb = part_shape(pt, tj, x[j], y[j], yaw[j], vb)
+        count = collide(va, na, ra, vb, nb, rb, out)
+    if count == 0:
+        return
+    ima = pt[ti, PT_INV_MASS]
+    iia = pt[ti, PT_INV_INERTIA]
+    imb = pt[tj, PT_INV_MASS]
+    iib = pt[tj, PT_INV_INERTIA]
+    e = 0.5 * (pt[ti, PT_E] + pt[tj, PT_E])
+    mu_s = 0.5 * (pt[ti, PT_MU_S] + pt[tj, PT_MU_S])
+    mu_k = 0.5 * (pt[ti, PT_MU_K] + pt[tj, PT_MU_K])
+    v_t = 0.5 * (pt[ti, PT_V_T] + pt[tj, PT_V_T])
+    nx = out[0]
+    ny = out[1]
+    deepest = 0.0
+    track = mp[MP_TRACK] != 0.0
+    for c in range(count):
+        px = out[2 + 3 * c]
+        py = out[3 + 3 * c]
+        depth = out[4 + 3 * c]
+        deepest = max(deepest, depth)
+        rax = px - x[i]
+        ray = py - y[i]
+        rbx = px - x[j]
+        rby = py - y[j]
+        if mode == MODE_IMPULSE:
+            (vx[i], vy[i], wz[i], vx[j], vy[j], wz[j], jn, jt, ut) = impulse_response(
+                vx[i], vy[i], wz[i], ima, iia, rax, ray, vx[j], vy[j], wz[j], imb, iib, rbx,
+                rby, nx, ny, e, mu_s, mu_k, v_t)
+            if track and jt != 0.0:
+                acc[A_CONTACT_FRICTION] += abs(jt * ut)
+        else:
+            fcx, fcy, ps, pd, pf = penalty_force(
+                vx[i], vy[i], wz[i], ima, iia, rax, ray, vx[j], vy[j], wz[j], imb, iib, rbx,
+                rby, nx, ny, depth, mp[MP_STIFFNESS], mp[MP_DAMPING], mp[MP_DT], mu_s, mu_k,
+                v_t)
+            fx[i] += fcx
+            fy[i] += fcy
+            tz[i] += rax * fcy - ray * fcx
+            fx[j] -= fcx
+            fy[j] -= fcy
+            tz[j] -= rbx * fcy - rby * fcx
+            if track:
+                dt = mp[MP_DT]
+                acc[A_SPRING] += ps * dt
+                acc[A_DAMPER] += pd * dt
+                acc[A_CONTACT_FRICTION] += pf * dt
+    if mode == MODE_IMPULSE:
+        excess = deepest - mp[MP_SLOP]
+        if excess > 0.0:
+            d = mp[MP_CORRECTION] * excess / (ima + imb)
+            x[i] += nx * d * ima
+            y[i] += ny * d * ima
+            x[j] -= nx * d * imb
+            y[j] -= ny * d * imb
+
+
+@njit(cache=True)
+def _fixed(i, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode, va, vb, nb, rb,
+           bvx, bvy, bw, bpx, bpy, e, mu, out, acc):
+    """Contact of part i with a fixed or kinematic body of core ``vb[:nb]``, radius ``rb``."""
+    ti = ptype[i]
+    na, ra = part_shape(pt, ti, x[i], y[i], yaw[i], va)
+    count = collide(va, na, ra, vb, nb, rb, out)
+    if count == 0:
+        return
+    ima = pt[ti, PT_INV_MASS]
+    iia = pt[ti, PT_INV_INERTIA]
+    # obstacle friction is the sliding value; the part's static/sliding ratio gives the static
+    ratio = pt[ti, PT_MU_S] / pt[ti, PT_MU_K] if pt[ti, PT_MU_K] > 0.0 else 1.0
+    mu_s = mu * ratio
+    v_t = pt[ti, PT_V_T]
+    nx = out[0]
+    ny = out[1]
+    deepest = 0.0
+    track = mp[MP_TRACK] != 0.0
+    for c in range(count):
+        px = out[2 + 3 * c]
+        py = out[3 + 3 * c]
+        depth = out[4 + 3 * c]
+        deepest = max(deepest, depth)
+        rax = px - x[i]
+        ray = py - y[i]
+        rbx = px - bpx
+        rby = py - bpy
+        if mode == MODE_IMPULSE:
+            (vx[i], vy[i], wz[i], _, _, _, jn, jt, ut) = impulse_response(
+                vx[i], vy[i], wz[i], ima, iia, rax, ray, bvx, bvy, bw, 0.0, 0.0, rbx, rby,
+                nx, ny, e, mu_s, mu, v_t)
+            if track and jt != 0.0:
+                acc[A_CONTACT_FRICTION] += abs(jt * ut)
+        else:
+            fcx, fcy, ps, pd, pf = penalty_force(
+                vx[i], vy[i], wz[i], ima, iia, rax, ray, bvx, bvy, bw, 0.0, 0.0, rbx, rby,
+                nx, ny, depth, mp[MP_STIFFNESS], mp[MP_DAMPING], mp[MP_DT], mu_s, mu, v_t)
+            fx[i] += fcx
+            fy[i] += fcy
+            tz[i] += rax * fcy - ray * fcx
+            if track:
+                dt = mp[MP_DT]
+                acc[A_SPRING] += ps * dt
+                acc[A_DAMPER] += pd * dt
+                acc[A_CONTACT_FRICTION] += pf * dt
+    if mode == MODE_IMPULSE:
+        excess = deepest - mp[MP_SLOP]
+        if excess > 0.0:
+            d = mp[MP_CORRECTION] * excess
+            x[i] += nx * d
+            y[i] += ny * d
+
+
+@njit(cache=True)
+def build_grid(n, x, y, gpar, gdim, cell_start, cell_items, part_cell):
+    """Bin parts 0..n-1 by centre into the uniform grid (counting sort, index order per cell).
+
+    :param gpar: (x0, y0, h): grid origin and cell size [m]. :param gdim: (nx, ny).
+    :param cell_start: int64[nx*ny + 1] output; ``cell_items``/``part_cell`` int64[capacity].
+    """
+    x0 = gpar[0]
+    y0 = gpar[1]
+    inv_h = 1.0 / gpar[2]
+    gnx = gdim[0]
+    gny = gdim[1]
+    ncell = gnx * gny
+    for c in range(ncell + 1):
+        cell_start[c] = 0
+    for i in range(n):
+        cx = int(math.floor((x[i] - x0) * inv_h)) if x[i] == x[i] else 0
+        cy = int(math.floor((y[i] - y0) * inv_h)) if y[i] == y[i] else 0
+        cx = min(max(cx, 0), gnx - 1)
+        cy = min(max(cy, 0), gny - 1)
+        c = cy * gnx + cx
+        part_cell[i] = c
+        cell_start[c + 1] += 1
+    for c in range(ncell):
+        cell_start[c + 1] += cell_start[c]
+    # fill using cell_items as the output and part order as the tie-break
+    for i in range(n):
+        c = part_cell[i]
+        # cursor: cell_start[c] is advanced, restored below
+        cell_items[cell_start[c]] = i
+        cell_start[c] += 1
+    for c in range(ncell - 1, 0, -1):
+        cell_start[c] = cell_start[c - 1]
+    cell_start[0] = 0
+
+
+@njit(cache=True)
+def contact_pass(n, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode,
+                 gdim, cell_start, cell_items, part_cell, static_start, static_items,
+                 shp, shp_verts, act_state, act_verts, cand, va, vb, out, acc):
+    """Resolve every contact of parts 0..n-1 once, in the canonical order.
+
+    :param shp: static shape table (S, SH_COLUMNS); ``shp_verts`` (V, 2) their cores [m].
+    :param act_state: actuator table (A, AS_COLUMNS); ``act_verts`` (A, 4, 2) their cores.
+    :param static_start: int64[cells + 1], ``static_items``: the static shapes of each cell.
+    :param cand: int64[capacity] scratch; ``va``, ``vb`` (4, 2) scratch; ``out`` float64[8].
+    :param acc: float64[A_COLUMNS] activities, accumulated when ``mp[MP_TRACK]``.
+    """
+    gnx = gdim[0]
+    gny = gdim[1]
+    for i in range(n):
+        bri = pt[ptype[i], PT_BRAD]
+        c = part_cell[i]
+        cx = c % gnx
+        cy = c // gnx
+        m = 0
+        for gy in range(max(cy - 1, 0), min(cy + 2, gny)):
+            for gx in range(max(cx - 1, 0), min(cx + 2, gnx)):
+                g = gy * gnx + gx
+                for k in range(cell_start[g], cell_start[g + 1]):
+                    j = cell_items[k]
+                    if j <= i:
+                        continue
+                    dx = x[j] - x[i]
+                    dy = y[j] - y[i]
+                    rr = bri + pt[ptype[j], PT_BRAD]
+                    if dx * dx + dy * dy < rr * rr:
+                        # insertion sort by j: canonical order
+                        p = m
+                        while p > 0 and cand[p - 1] > j:
+                            cand[p] = cand[p - 1]
+                            p -= 1
+                        cand[p] = j
+                        m += 1
+        for p in range(m):
+            j = cand[p]
+            _pair(i, j, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode, va, vb, out, acc)
+    for i in range(n):
+        bri = pt[ptype[i], PT_BRAD]
+        c = part_cell[i]
+        for k in range(static_start[c], static_start[c + 1]):
+            s = static_items[k]
+            if (x[i] + bri <= shp[s, SH_XMIN] or x[i] - bri >= shp[s, SH_XMAX]
+                    or y[i] + bri <= shp[s, SH_YMIN] or y[i] - bri >= shp[s, SH_YMAX]):
+                continue
+            off = int(shp[s, SH_OFF])
+            nv = int(shp[s, SH_NV])
+            _fixed(i, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode, va,
+                   shp_verts[off:off + nv], nv, shp[s, SH_R], 0.0, 0.0, 0.0, 0.0, 0.0,
+                   shp[s, SH_E], shp[s, SH_MU], out, acc)
+        for a in range(act_state.shape[0]):
+            if act_state[a, AS_ACTIVE] == 0.0:
+                continue
+            if (x[i] + bri <= act_state[a, AS_XMIN] or x[i] - bri >= act_state[a, AS_XMAX]
+                    or y[i] + bri <= act_state[a, AS_YMIN]
+                    or y[i] - bri >= act_state[a, AS_YMAX]):
+                continue
+            nv = int(act_state[a, AS_NV])
+            _fixed(i, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode, va,
+                   act_verts[a], nv, act_state[a, AS_R], act_state[a, AS_VX],
+                   act_state[a, AS_VY], act_state[a, AS_W], act_state[a, AS_PX],
+                   act_state[a, AS_PY], act_state[a, AS_E], act_state[a, AS_MU], out, acc)
+
+
+def scratch(capacity: int):
+    """Return the scratch arrays of :func:`contact_pass`: (cand, va, vb, out)."""
+    return (np.zeros(capacity, dtype=np.int64), np.zeros((4, 2)), np.zeros((4, 2)),
+            np.zeros(8))

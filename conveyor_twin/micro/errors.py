@@ -1,0 +1,13 @@
+"""Errors of the micro simulator."""
+
+
+class MicroError(RuntimeError):
+    """Base of the micro simulator's errors."""
+
+
+class SpawnOverlapError(MicroError, ValueError):
+    """An explicit placement overlaps a part, an obstacle or a solid actuator (nothing placed)."""
+
+
+class CapacityError(MicroError):
+    """The preallocated part capacity is exhausted."""
