@@ -184,8 +184,49 @@ def part_shape(pt, t, x, y, yaw, verts):
     return 4, 0.0
 
 
+# --- contact record columns (float64 (capacity, CT_COLUMNS)); ``cidx`` (capacity, 2) holds
+# the part indices a and b (b = -1: fixed or kinematic body, its velocity in CT_BVX..CT_BW) ---
+CT_NX = 0             # unit normal, pointing to a
+CT_NY = 1
+CT_RAX = 2            # contact point relative to a's centre [m]
+CT_RAY = 3
+CT_RBX = 4            # relative to b's centre or the kinematic body's pivot [m]
+CT_RBY = 5
+CT_DEPTH = 6          # penetration at detection [m]
+CT_E = 7
+CT_MU_S = 8
+CT_MU_K = 9
+CT_V_T = 10
+CT_BVX = 11
+CT_BVY = 12
+CT_BW = 13
+CT_COLUMNS = 14
+
+
 @njit(cache=True)
-def _pair(i, j, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode, va, vb, out, acc):
+def _record(nc, ct, cidx, a, b, px, py, ax, ay, bx, by, nx, ny, depth, e, mu_s, mu_k, v_t,
+            bvx, bvy, bw):
+    ct[nc, CT_NX] = nx
+    ct[nc, CT_NY] = ny
+    ct[nc, CT_RAX] = px - ax
+    ct[nc, CT_RAY] = py - ay
+    ct[nc, CT_RBX] = px - bx
+    ct[nc, CT_RBY] = py - by
+    ct[nc, CT_DEPTH] = depth
+    ct[nc, CT_E] = e
+    ct[nc, CT_MU_S] = mu_s
+    ct[nc, CT_MU_K] = mu_k
+    ct[nc, CT_V_T] = v_t
+    ct[nc, CT_BVX] = bvx
+    ct[nc, CT_BVY] = bvy
+    ct[nc, CT_BW] = bw
+    cidx[nc, 0] = a
+    cidx[nc, 1] = b
+
+
+@njit(cache=True)
+def _pair(i, j, ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx):
+    """Record the contacts of parts i and j; return the new contact count."""
     ti = ptype[i]
     tj = ptype[j]
     if pt[ti, PT_SHAPE] == SHAPE_DISC and pt[tj, PT_SHAPE] == SHAPE_DISC:
@@ -195,112 +236,39 @@ def _pair(i, j, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode, va, vb, 
         nb, rb = part_shape(pt, tj, x[j], y[j], yaw[j], vb)
         count = collide(va, na, ra, vb, nb, rb, out)
     if count == 0:
-        return
-    ima = pt[ti, PT_INV_MASS]
-    iia = pt[ti, PT_INV_INERTIA]
-    imb = pt[tj, PT_INV_MASS]
-    iib = pt[tj, PT_INV_INERTIA]
+        return nc
     e = 0.5 * (pt[ti, PT_E] + pt[tj, PT_E])
     mu_s = 0.5 * (pt[ti, PT_MU_S] + pt[tj, PT_MU_S])
     mu_k = 0.5 * (pt[ti, PT_MU_K] + pt[tj, PT_MU_K])
     v_t = 0.5 * (pt[ti, PT_V_T] + pt[tj, PT_V_T])
-    nx = out[0]
-    ny = out[1]
-    deepest = 0.0
-    track = mp[MP_TRACK] != 0.0
     for c in range(count):
-        px = out[2 + 3 * c]
-        py = out[3 + 3 * c]
-        depth = out[4 + 3 * c]
-        deepest = max(deepest, depth)
-        rax = px - x[i]
-        ray = py - y[i]
-        rbx = px - x[j]
-        rby = py - y[j]
-        if mode == MODE_IMPULSE:
-            (vx[i], vy[i], wz[i], vx[j], vy[j], wz[j], jn, jt, ut) = impulse_response(
-                vx[i], vy[i], wz[i], ima, iia, rax, ray, vx[j], vy[j], wz[j], imb, iib, rbx,
-                rby, nx, ny, e, mu_s, mu_k, v_t)
-            if track and jt != 0.0:
-                acc[A_CONTACT_FRICTION] += abs(jt * ut)
-        else:
-            fcx, fcy, ps, pd, pf = penalty_force(
-                vx[i], vy[i], wz[i], ima, iia, rax, ray, vx[j], vy[j], wz[j], imb, iib, rbx,
-                rby, nx, ny, depth, mp[MP_STIFFNESS], mp[MP_DAMPING], mp[MP_DT], mu_s, mu_k,
-                v_t)
-            fx[i] += fcx
-            fy[i] += fcy
-            tz[i] += rax * fcy - ray * fcx
-            fx[j] -= fcx
-            fy[j] -= fcy
-            tz[j] -= rbx * fcy - rby * fcx
-            if track:
-                dt = mp[MP_DT]
-                acc[A_SPRING] += ps * dt
-                acc[A_DAMPER] += pd * dt
-                acc[A_CONTACT_FRICTION] += pf * dt
-    if mode == MODE_IMPULSE:
-        excess = deepest - mp[MP_SLOP]
-        if excess > 0.0:
-            d = mp[MP_CORRECTION] * excess / (ima + imb)
-            x[i] += nx * d * ima
-            y[i] += ny * d * ima
-            x[j] -= nx * d * imb
-            y[j] -= ny * d * imb
+        if nc >= ct.shape[0]:
+            return nc
+        _record(nc, ct, cidx, i, j, out[2 + 3 * c], out[3 + 3 * c], x[i], y[i], x[j], y[j],
+                out[0], out[1], out[4 + 3 * c], e, mu_s, mu_k, v_t, 0.0, 0.0, 0.0)
+        nc += 1
+    return nc
 
 
 @njit(cache=True)
-def _fixed(i, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode, va, vb, nb, rb,
-           bvx, bvy, bw, bpx, bpy, e, mu, out, acc):
-    """Contact of part i with a fixed or kinematic body of core ``vb[:nb]``, radius ``rb``."""
+def _fixed(i, ptype, x, y, yaw, pt, va, vb, nb, rb, bvx, bvy, bw, bpx, bpy, e, mu, out,
+           nc, ct, cidx):
+    """Record the contacts of part i with a fixed or kinematic body (core ``vb[:nb]``)."""
     ti = ptype[i]
     na, ra = part_shape(pt, ti, x[i], y[i], yaw[i], va)
     count = collide(va, na, ra, vb, nb, rb, out)
     if count == 0:
-        return
-    ima = pt[ti, PT_INV_MASS]
-    iia = pt[ti, PT_INV_INERTIA]
-    # obstacle friction is the sliding value; the part's static/sliding ratio gives the static
+        return nc
+    # the obstacle's friction is the sliding value; the part's static/sliding ratio the static
     ratio = pt[ti, PT_MU_S] / pt[ti, PT_MU_K] if pt[ti, PT_MU_K] > 0.0 else 1.0
-    mu_s = mu * ratio
-    v_t = pt[ti, PT_V_T]
-    nx = out[0]
-    ny = out[1]
-    deepest = 0.0
-    track = mp[MP_TRACK] != 0.0
     for c in range(count):
-        px = out[2 + 3 * c]
-        py = out[3 + 3 * c]
-        depth = out[4 + 3 * c]
-        deepest = max(deepest, depth)
-        rax = px - x[i]
-        ray = py - y[i]
-        rbx = px - bpx
-        rby = py - bpy
-        if mode == MODE_IMPULSE:
-            (vx[i], vy[i], wz[i], _, _, _, jn, jt, ut) = impulse_response(
-                vx[i], vy[i], wz[i], ima, iia, rax, ray, bvx, bvy, bw, 0.0, 0.0, rbx, rby,
-                nx, ny, e, mu_s, mu, v_t)
-            if track and jt != 0.0:
-                acc[A_CONTACT_FRICTION] += abs(jt * ut)
-        else:
-            fcx, fcy, ps, pd, pf = penalty_force(
-                vx[i], vy[i], wz[i], ima, iia, rax, ray, bvx, bvy, bw, 0.0, 0.0, rbx, rby,
-                nx, ny, depth, mp[MP_STIFFNESS], mp[MP_DAMPING], mp[MP_DT], mu_s, mu, v_t)
-            fx[i] += fcx
-            fy[i] += fcy
-            tz[i] += rax * fcy - ray * fcx
-            if track:
-                dt = mp[MP_DT]
-                acc[A_SPRING] += ps * dt
-                acc[A_DAMPER] += pd * dt
-                acc[A_CONTACT_FRICTION] += pf * dt
-    if mode == MODE_IMPULSE:
-        excess = deepest - mp[MP_SLOP]
-        if excess > 0.0:
-            d = mp[MP_CORRECTION] * excess
-            x[i] += nx * d
-            y[i] += ny * d
+        if nc >= ct.shape[0]:
+            return nc
+        _record(nc, ct, cidx, i, -1, out[2 + 3 * c], out[3 + 3 * c], x[i], y[i], bpx, bpy,
+                out[0], out[1], out[4 + 3 * c], e, mu * ratio, mu, pt[ti, PT_V_T], bvx, bvy,
+                bw)
+        nc += 1
+    return nc
 
 
 @njit(cache=True)
@@ -340,19 +308,20 @@ def build_grid(n, x, y, gpar, gdim, cell_start, cell_items, part_cell):
 
 
 @njit(cache=True)
-def contact_pass(n, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode,
-                 gdim, cell_start, cell_items, part_cell, static_start, static_items,
-                 shp, shp_verts, act_state, act_verts, cand, va, vb, out, acc):
-    """Resolve every contact of parts 0..n-1 once, in the canonical order.
+def detect(n, ptype, x, y, yaw, pt, gdim, cell_start, cell_items, part_cell, static_start,
+           static_items, shp, shp_verts, act_state, act_verts, cand, va, vb, out, ct, cidx):
+    """Record every contact of parts 0..n-1 in the canonical order; return how many.
 
     :param shp: static shape table (S, SH_COLUMNS); ``shp_verts`` (V, 2) their cores [m].
     :param act_state: actuator table (A, AS_COLUMNS); ``act_verts`` (A, 4, 2) their cores.
     :param static_start: int64[cells + 1], ``static_items``: the static shapes of each cell.
     :param cand: int64[capacity] scratch; ``va``, ``vb`` (4, 2) scratch; ``out`` float64[8].
-    :param acc: float64[A_COLUMNS] activities, accumulated when ``mp[MP_TRACK]``.
+    :param ct: (C, CT_COLUMNS) contact records, ``cidx`` (C, 2) their bodies (output). When
+        full, further contacts are dropped (the caller sizes it; see ``contacts_full``).
     """
     gnx = gdim[0]
     gny = gdim[1]
+    nc = 0
     for i in range(n):
         bri = pt[ptype[i], PT_BRAD]
         c = part_cell[i]
@@ -378,8 +347,7 @@ def contact_pass(n, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode,
                         cand[p] = j
                         m += 1
         for p in range(m):
-            j = cand[p]
-            _pair(i, j, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode, va, vb, out, acc)
+            nc = _pair(i, cand[p], ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx)
     for i in range(n):
         bri = pt[ptype[i], PT_BRAD]
         c = part_cell[i]
@@ -390,9 +358,9 @@ def contact_pass(n, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode,
                 continue
             off = int(shp[s, SH_OFF])
             nv = int(shp[s, SH_NV])
-            _fixed(i, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode, va,
-                   shp_verts[off:off + nv], nv, shp[s, SH_R], 0.0, 0.0, 0.0, 0.0, 0.0,
-                   shp[s, SH_E], shp[s, SH_MU], out, acc)
+            nc = _fixed(i, ptype, x, y, yaw, pt, va, shp_verts[off:off + nv], nv,
+                        shp[s, SH_R], 0.0, 0.0, 0.0, 0.0, 0.0, shp[s, SH_E], shp[s, SH_MU],
+                        out, nc, ct, cidx)
         for a in range(act_state.shape[0]):
             if act_state[a, AS_ACTIVE] == 0.0:
                 continue
@@ -400,14 +368,149 @@ def contact_pass(n, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode,
                     or y[i] + bri <= act_state[a, AS_YMIN]
                     or y[i] - bri >= act_state[a, AS_YMAX]):
                 continue
-            nv = int(act_state[a, AS_NV])
-            _fixed(i, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode, va,
-                   act_verts[a], nv, act_state[a, AS_R], act_state[a, AS_VX],
-                   act_state[a, AS_VY], act_state[a, AS_W], act_state[a, AS_PX],
-                   act_state[a, AS_PY], act_state[a, AS_E], act_state[a, AS_MU], out, acc)
+            nc = _fixed(i, ptype, x, y, yaw, pt, va, act_verts[a], int(act_state[a, AS_NV]),
+                        act_state[a, AS_R], act_state[a, AS_VX], act_state[a, AS_VY],
+                        act_state[a, AS_W], act_state[a, AS_PX], act_state[a, AS_PY],
+                        act_state[a, AS_E], act_state[a, AS_MU], out, nc, ct, cidx)
+    return nc
+
+
+@njit(cache=True)
+def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc):
+    """Apply the contacts' impulses in ``passes`` sweeps (canonical order).
+
+    The first sweep is the seed's response, with restitution. Further sweeps are plastic and
+    touch only contacts still closing (so they change nothing for isolated impacts). With
+    ``passes >= 2`` the last sweep is a shock-propagation sweep: of two parts the one further
+    downstream (larger ``key``, its position along its belt's direction [m]) counts as fixed,
+    so a pile pressed by the belt against an obstacle is stopped in one sweep.
+    """
+    track = mp[MP_TRACK] != 0.0
+    for it in range(passes):
+        shock = passes >= 2 and it == passes - 1
+        for c in range(nc):
+            a = cidx[c, 0]
+            b = cidx[c, 1]
+            ta = ptype[a]
+            ima = pt[ta, PT_INV_MASS]
+            iia = pt[ta, PT_INV_INERTIA]
+            e = ct[c, CT_E] if it == 0 else 0.0
+            if b >= 0:
+                tb = ptype[b]
+                imb = pt[tb, PT_INV_MASS]
+                iib = pt[tb, PT_INV_INERTIA]
+                if shock:
+                    if key[a] > key[b]:
+                        ima = 0.0
+                        iia = 0.0
+                    else:
+                        imb = 0.0
+                        iib = 0.0
+                (vx[a], vy[a], wz[a], vx[b], vy[b], wz[b], jn, jt, ut) = impulse_response(
+                    vx[a], vy[a], wz[a], ima, iia, ct[c, CT_RAX], ct[c, CT_RAY],
+                    vx[b], vy[b], wz[b], imb, iib,
+                    ct[c, CT_RBX], ct[c, CT_RBY], ct[c, CT_NX], ct[c, CT_NY], e,
+                    ct[c, CT_MU_S], ct[c, CT_MU_K], ct[c, CT_V_T])
+            else:
+                (vx[a], vy[a], wz[a], _, _, _, jn, jt, ut) = impulse_response(
+                    vx[a], vy[a], wz[a], ima, iia, ct[c, CT_RAX], ct[c, CT_RAY],
+                    ct[c, CT_BVX], ct[c, CT_BVY], ct[c, CT_BW], 0.0, 0.0,
+                    ct[c, CT_RBX], ct[c, CT_RBY], ct[c, CT_NX], ct[c, CT_NY], e,
+                    ct[c, CT_MU_S], ct[c, CT_MU_K], ct[c, CT_V_T])
+            if track and jt != 0.0:
+                acc[A_CONTACT_FRICTION] += abs(jt * ut)
+
+
+@njit(cache=True)
+def correct_positions(nc, ct, cidx, ptype, x, y, x0, y0, pt, passes, key, mp):
+    """Push overlapping bodies apart along the contact normals (translation only).
+
+    The depth of each contact is estimated from its detected depth and how far its bodies
+    moved since (``x0``, ``y0``: positions at detection); each sweep removes
+    ``mp[MP_CORRECTION]`` of the excess over the slop, in inverse-mass proportion; the last of
+    ``passes >= 2`` sweeps moves only the upstream part of a pair (see :func:`solve_impulses`).
+    """
+    slop = mp[MP_SLOP]
+    frac = mp[MP_CORRECTION]
+    for it in range(passes):
+        shock = passes >= 2 and it == passes - 1
+        for c in range(nc):
+            a = cidx[c, 0]
+            b = cidx[c, 1]
+            nx = ct[c, CT_NX]
+            ny = ct[c, CT_NY]
+            ima = pt[ptype[a], PT_INV_MASS]
+            moved = nx * (x[a] - x0[a]) + ny * (y[a] - y0[a])
+            imb = 0.0
+            if b >= 0:
+                imb = pt[ptype[b], PT_INV_MASS]
+                moved -= nx * (x[b] - x0[b]) + ny * (y[b] - y0[b])
+                if shock:
+                    if key[a] > key[b]:
+                        ima = 0.0
+                    else:
+                        imb = 0.0
+            excess = ct[c, CT_DEPTH] - moved - slop
+            if excess <= 0.0:
+                continue
+            d = frac * excess / (ima + imb)
+            x[a] += nx * d * ima
+            y[a] += ny * d * ima
+            if b >= 0:
+                x[b] -= nx * d * imb
+                y[b] -= ny * d * imb
+
+
+@njit(cache=True)
+def penalty_forces(nc, ct, cidx, ptype, vx, vy, wz, fx, fy, tz, pt, mp, acc):
+    """Accumulate the penalty spring-damper and friction forces of the contacts [N, N m]."""
+    track = mp[MP_TRACK] != 0.0
+    dt = mp[MP_DT]
+    for c in range(nc):
+        a = cidx[c, 0]
+        b = cidx[c, 1]
+        ta = ptype[a]
+        if b >= 0:
+            tb = ptype[b]
+            bvx = vx[b]
+            bvy = vy[b]
+            bw = wz[b]
+            imb = pt[tb, PT_INV_MASS]
+            iib = pt[tb, PT_INV_INERTIA]
+        else:
+            bvx = ct[c, CT_BVX]
+            bvy = ct[c, CT_BVY]
+            bw = ct[c, CT_BW]
+            imb = 0.0
+            iib = 0.0
+        rax = ct[c, CT_RAX]
+        ray = ct[c, CT_RAY]
+        rbx = ct[c, CT_RBX]
+        rby = ct[c, CT_RBY]
+        fcx, fcy, ps, pd, pf = penalty_force(
+            vx[a], vy[a], wz[a], pt[ta, PT_INV_MASS], pt[ta, PT_INV_INERTIA], rax, ray,
+            bvx, bvy, bw, imb, iib, rbx, rby, ct[c, CT_NX], ct[c, CT_NY], ct[c, CT_DEPTH],
+            mp[MP_STIFFNESS], mp[MP_DAMPING], dt, ct[c, CT_MU_S], ct[c, CT_MU_K],
+            ct[c, CT_V_T])
+        fx[a] += fcx
+        fy[a] += fcy
+        tz[a] += rax * fcy - ray * fcx
+        if b >= 0:
+            fx[b] -= fcx
+            fy[b] -= fcy
+            tz[b] -= rbx * fcy - rby * fcx
+        if track:
+            acc[A_SPRING] += ps * dt
+            acc[A_DAMPER] += pd * dt
+            acc[A_CONTACT_FRICTION] += pf * dt
+
+
+# contact records per part slot
+CONTACTS_PER_PART = 8
 
 
 def scratch(capacity: int):
-    """Return the scratch arrays of :func:`contact_pass`: (cand, va, vb, out)."""
+    """Return the scratch arrays of the contact kernels: (cand, va, vb, out, ct, cidx)."""
+    size = CONTACTS_PER_PART * capacity
     return (np.zeros(capacity, dtype=np.int64), np.zeros((4, 2)), np.zeros((4, 2)),
-            np.zeros(8))
+            np.zeros(8), np.zeros((size, CT_COLUMNS)), np.zeros((size, 2), dtype=np.int64))

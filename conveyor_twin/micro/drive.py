@@ -113,3 +113,26 @@ def belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, speed, mp, acc):
             wz[i] = w - w_limit if w > 0.0 else w + w_limit
             if track:
                 acc[A_BELT] += (w_limit / pt[t, PT_INV_INERTIA]) * (abs(w) - 0.5 * w_limit)
+
+
+@njit(cache=True)
+def belt_key(n, x, y, belts, key):
+    """Write each part's position along the direction of the belt under it [m] into ``key``.
+
+    Off the belts the first belt's direction is used. Shock propagation treats the part with
+    the larger key (further downstream) as the support of the other.
+    """
+    for i in range(n):
+        k = 0
+        for b in range(belts.shape[0]):
+            rx = x[i] - belts[b, BT_SX]
+            ry = y[i] - belts[b, BT_SY]
+            u = rx * belts[b, BT_DX] + ry * belts[b, BT_DY]
+            w = ry * belts[b, BT_DX] - rx * belts[b, BT_DY]
+            if 0.0 <= u <= belts[b, BT_LENGTH] and abs(w) <= belts[b, BT_HALF_WIDTH]:
+                k = b
+                break
+        if belts.shape[0]:
+            key[i] = x[i] * belts[k, BT_DX] + y[i] * belts[k, BT_DY]
+        else:
+            key[i] = x[i]

@@ -5,8 +5,9 @@ Each step (the state after step ``k`` is stamped ``k dt``):
 2. sources release the parts due at the step's start;
 3. the pose at the step's start is saved (for light-barrier interpolation);
 4. ``m`` substeps of length ``dt / m``, each: actuator poses interpolated, belt friction on the
-   velocities, broad phase (uniform grid), contacts (impulses with penetration correction, or
-   penalty forces), then positions ``x += h v`` (semi-implicit Euler);
+   velocities, broad phase (uniform grid) and near phase (contact records), then either the
+   impulses (velocities), positions ``x += h v`` (semi-implicit Euler) and the penetration
+   correction, or the penalty forces (velocities) and ``x += h v``;
 5. light barriers sampled, edges recorded;
 6. parts in sinks or outside the region leave (arrays compacted, order kept).
 
@@ -21,12 +22,13 @@ from numba import njit
 
 from conveyor_twin.micro.actuators import AP_LENGTH, AP_WIDTH, actuator_shapes
 from conveyor_twin.micro.contacts import (A_INERTIA, MODE_PENALTY, MP_DT, MP_TRACK,
-                                          build_grid, contact_pass)
-from conveyor_twin.micro.drive import belt_drive, ramp
+                                          build_grid, correct_positions, detect,
+                                          penalty_forces, solve_impulses)
+from conveyor_twin.micro.drive import belt_drive, belt_key, ramp
 from conveyor_twin.micro.sensors import update_barriers
 from conveyor_twin.micro.sinks import leave
 from conveyor_twin.micro.sources import run_sources
-from conveyor_twin.micro.state import (C_N, C_STEP, C_SUBSTEPS, C_SUBSTEPS_CAPPED,
+from conveyor_twin.micro.state import (C_CONTACTS_FULL, C_N, C_STEP, C_SUBSTEPS, C_SUBSTEPS_CAPPED,
                                        P_VX, P_VY, P_WZ, P_X, P_X_PREV, P_Y, P_Y_PREV, P_YAW,
                                        P_YAW_PREV, PT_BRAD, PT_INV_INERTIA, PT_INV_MASS)
 
@@ -38,7 +40,8 @@ CF_MAX_TRAVEL = 3     # largest travel per substep [m]
 CF_PENALTY_DT = 4     # largest stable penalty substep [s]
 CF_MAX_SUB = 5        # most substeps per step
 CF_FLOOR_MU = 6
-CF_COLUMNS = 7
+CF_PASSES = 7         # impulse model: sweeps over the contacts (velocity and position)
+CF_COLUMNS = 8
 
 # --- rows of the belt array ``belt_v`` (3, B) ---
 BV_TARGET = 0
@@ -85,7 +88,7 @@ def _substeps(n, ptype, P, pt, apar, act_v, cfg):
 @njit(cache=True)
 def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, apar, act_v,
               act_state, act_verts, gpar, gdim, cell_start, cell_items, part_cell,
-              static_start, static_items, shp, shp_verts, cand, va, vb, out, acc,
+              static_start, static_items, shp, shp_verts, cand, va, vb, out, ct, cidx, acc,
               src, src_next, src_state, rng, sinks, sink_count, region, ob_id, ob_type, ob_P,
               lb, blocked, edge_count, last_part, ev_i, ev_f):
     """Advance ``nsteps`` steps in place (see the module docstring for the arrays' meaning)."""
@@ -102,7 +105,9 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
     fy = W[1]
     tz = W[2]
     ke = W[3]
+    key = W[4]
     na = apar.shape[0]
+    passes = int(cfg[CF_PASSES])
     for _ in range(nsteps):
         step = counters[C_STEP] + 1
         # 1. actuation
@@ -148,15 +153,24 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
                     fy[i] = 0.0
                     tz[i] = 0.0
             build_grid(n, x, y, gpar, gdim, cell_start, cell_items, part_cell)
-            contact_pass(n, ptype, x, y, yaw, vx, vy, wz, fx, fy, tz, pt, mp, mode,
-                         gdim, cell_start, cell_items, part_cell, static_start, static_items,
-                         shp, shp_verts, act_state, act_verts, cand, va, vb, out, acc)
+            nc = detect(n, ptype, x, y, yaw, pt, gdim, cell_start, cell_items, part_cell,
+                        static_start, static_items, shp, shp_verts, act_state, act_verts,
+                        cand, va, vb, out, ct, cidx)
+            if nc == ct.shape[0]:
+                counters[C_CONTACTS_FULL] += 1
             if mode == MODE_PENALTY:
+                penalty_forces(nc, ct, cidx, ptype, vx, vy, wz, fx, fy, tz, pt, mp, acc)
                 for i in range(n):
                     t = ptype[i]
                     vx[i] += h * fx[i] * pt[t, PT_INV_MASS]
                     vy[i] += h * fy[i] * pt[t, PT_INV_MASS]
                     wz[i] += h * tz[i] * pt[t, PT_INV_INERTIA]
+            else:
+                belt_key(n, x, y, belts, key)
+                solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc)
+                for i in range(n):
+                    fx[i] = x[i]
+                    fy[i] = y[i]
             for i in range(n):
                 x[i] += h * vx[i]
                 y[i] += h * vy[i]
@@ -166,6 +180,9 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
                 elif a <= -math.pi:
                     a += 2.0 * math.pi
                 yaw[i] = a
+            if mode != MODE_PENALTY:
+                # fx, fy hold the positions at detection
+                correct_positions(nc, ct, cidx, ptype, x, y, fx, fy, pt, passes, key, mp)
             if track:
                 for i in range(n):
                     t = ptype[i]

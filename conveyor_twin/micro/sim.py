@@ -33,13 +33,14 @@ from conveyor_twin.micro.geometry import build_grid, obstacle_shapes, world_boun
 from conveyor_twin.micro.kernel import (AV_LIMIT, AV_POSITION, AV_PREVIOUS, AV_SUB,
                                         AV_TARGET, BV_LIMIT, BV_SPEED, BV_TARGET, CF_AUTO_SUB,
                                         CF_COLUMNS, CF_DT, CF_FLOOR_MU, CF_MAX_SUB,
-                                        CF_MAX_TRAVEL, CF_MODE, CF_PENALTY_DT, run_steps)
+                                        CF_MAX_TRAVEL, CF_MODE, CF_PASSES, CF_PENALTY_DT,
+                                        run_steps)
 from conveyor_twin.micro.sensors import (EV_BARRIER, EV_BLOCKED, EV_FLOAT_COLUMNS,
                                          EV_FRACTION, EV_INT_COLUMNS, EV_PART, EV_STEP,
                                          EV_TIME, barrier_table)
 from conveyor_twin.micro.sinks import OB_ROWS, RG_SIZE, remove_marked
 from conveyor_twin.micro.sources import (SS_COLUMNS, place, seed_streams, source_table)
-from conveyor_twin.micro.state import (C_ENTERED, C_EVENTS, C_EVENTS_DROPPED, C_N,
+from conveyor_twin.micro.state import (C_CONTACTS_FULL, C_ENTERED, C_EVENTS, C_EVENTS_DROPPED, C_N,
                                        C_NEXT_ID, C_OUTBOX, C_REGION_LEFT, C_REMOVED, C_STEP,
                                        C_SUBSTEPS, C_SUBSTEPS_CAPPED, PartState, PartsView,
                                        part_table, SHAPE_DISC, PT_SHAPE, PT_RADIUS, PT_HL,
@@ -49,6 +50,10 @@ from conveyor_twin.micro.state import (C_ENTERED, C_EVENTS, C_EVENTS_DROPPED, C_
 EVENT_CAPACITY = 4096
 # Penalty model: largest omega * dt of the stiffest contact (symplectic Euler is stable < 2).
 PENALTY_OMEGA_DT = 0.5
+# Impulse model: sweeps over the contacts per substep (the first with restitution; the others
+# plastic, touching only contacts still closing: they matter only where contacts share bodies,
+# as in a jam). 1 is the seed's single pass.
+CONTACT_PASSES = 2
 # Most substeps per step (impulse: travel; penalty: stability).
 MAX_SUBSTEPS_IMPULSE = 64
 MAX_SUBSTEPS_PENALTY = 1_000_000
@@ -101,11 +106,13 @@ class MicroSim:
     :param auto_substeps: choose substeps for travel and penalty stability; ``False`` takes
         exactly one substep per step (to measure raw step limits).
     :param event_capacity: size of the light-barrier events buffer.
+    :param passes: impulse model: sweeps over the contacts per substep (see
+        :data:`CONTACT_PASSES`).
     """
 
     def __init__(self, cell: Cell, *, seed: int, region: Optional[Region] = None,
                  track_activity: Optional[bool] = None, auto_substeps: bool = True,
-                 event_capacity: int = EVENT_CAPACITY) -> None:
+                 event_capacity: int = EVENT_CAPACITY, passes: int = CONTACT_PASSES) -> None:
         micro = cell.micro
         self.cell = cell
         self.seed = int(seed)
@@ -137,6 +144,7 @@ class MicroSim:
                                                   micro.penalty_damping)
         self.cfg[CF_MAX_SUB] = MAX_SUBSTEPS_PENALTY if penalty else MAX_SUBSTEPS_IMPULSE
         self.cfg[CF_FLOOR_MU] = FLOOR_FRICTION
+        self.cfg[CF_PASSES] = max(1, int(passes))
         # belts
         self.belts = belt_table(cell.belts, self.dt)
         self.belt_v = np.zeros((3, len(cell.belts)))
@@ -160,8 +168,8 @@ class MicroSim:
         self._cell_start = np.zeros(self.grid.cells + 1, dtype=np.int64)
         self._cell_items = np.zeros(cap, dtype=np.int64)
         self._part_cell = np.zeros(cap, dtype=np.int64)
-        self._W = np.zeros((4, cap))
-        self._cand, self._va, self._vb, self._out = scratch(cap)
+        self._W = np.zeros((5, cap))
+        self._cand, self._va, self._vb, self._out, self._ct, self._cidx = scratch(cap)
         self.acc = np.zeros(A_COLUMNS)
         # sources, sinks, region
         self.src = source_table(cell, cell.sources)
@@ -190,7 +198,7 @@ class MicroSim:
                       self.act_verts, self.grid.gpar, self.grid.gdim, self._cell_start,
                       self._cell_items, self._part_cell, self.grid.static_start,
                       self.grid.static_items, self.shapes, self.shape_verts, self._cand,
-                      self._va, self._vb, self._out, self.acc, self.src, self.src_next,
+                      self._va, self._vb, self._out, self._ct, self._cidx, self.acc, self.src, self.src_next,
                       self.src_state, self.rng, self.sinks, self.sink_count,
                       self.region_array, self._ob_id, self._ob_type, self._ob_P, self.lb,
                       self.blocked, self.edge_count, self.last_part, self._ev_i, self._ev_f)
@@ -368,7 +376,8 @@ class MicroSim:
                 'in_flight': self.n, 'handed_over': int(c[C_REGION_LEFT]),
                 'removed': int(c[C_REMOVED]), 'substeps': int(c[C_SUBSTEPS]),
                 'substeps_capped': int(c[C_SUBSTEPS_CAPPED]),
-                'events_dropped': int(c[C_EVENTS_DROPPED])}
+                'events_dropped': int(c[C_EVENTS_DROPPED]),
+                'contacts_full': int(c[C_CONTACTS_FULL])}
 
     # --- light barriers ---
     @property

@@ -1,0 +1,331 @@
+"""``conveyor-twin bench micro``: the micro simulator against pymunk on the same jammed scene.
+
+The scene (``conveyor_twin/cell/bench_micro.yaml``, the peer measurement of architecture.md):
+a 2.0 m x 0.5 m belt at 0.5 m/s with side walls and a 45 degree deflector across its whole
+width; N discs of 10 mm diameter and 0.01 kg are placed on a hexagonal lattice upstream and
+run into the deflector for the warm-up, so the timed steps are a jam. Both engines step at
+dt = 1 ms with the same per-pair friction and restitution, the same disc and wall geometry
+(walls and deflector as segments of radius 5 mm) and the same belt drive (velocity relaxes
+toward the belt velocity by at most ``mu g dt``, spin by the matching torque). pymunk runs
+with its defaults (10 iterations, bounding-box tree) except ``collision_slop = 1e-4 m`` (ours);
+its belt drive is applied each step with ``pymunk.batch`` and numpy (no per-body Python).
+``pymunk step`` times ``space.step`` alone; ``pymunk total`` adds the drive. The ratios are
+pymunk / ours; ``x step`` (against ``space.step`` alone) is the conservative one.
+
+The second part reproduces seed 000's claim on the same scene (N discs, 0.5 s, no automatic
+substeps): the largest step at which each contact model stays stable and accurate (deepest
+penetration below 10 % of the radius, no part faster than twice the belt, none through a wall).
+The penalty model's stiffness is first picked by activity (seed 001, springs <= 1 % of the
+least active physical element).
+
+Measured on the shared 2-core machine (numba 0.68, pymunk 7.3, 2000 warm-up + 2000 timed
+steps; ms/step mean / p99):
+
+see the final report for the figures of the latest run (they are also printed by the run).
+"""
+
+import argparse
+import dataclasses
+import json
+import math
+from pathlib import Path
+import sys
+import time
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from conveyor_twin.cell import load_cell
+from conveyor_twin.cell.model import Cell
+from conveyor_twin.micro import MicroSim
+
+SCENE = Path(__file__).resolve().parent.parent / 'cell' / 'bench_micro.yaml'
+DEFAULT_SIZES = (100, 1000, 5000)
+DEFAULT_STEPS = 2000
+DEFAULT_WARMUP = 2000
+LATTICE_GAP = 0.0002          # m between neighbouring discs when placed
+
+
+def scene(n: int, *, contact: str = 'impulse', step: Optional[float] = None,
+          **micro) -> Cell:
+    """Return the benchmark cell with room for ``n`` discs."""
+    cell = load_cell(str(SCENE))
+    settings = cell.settings if step is None else dataclasses.replace(cell.settings,
+                                                                      step=step)
+    return dataclasses.replace(cell, settings=settings, micro=dataclasses.replace(
+        cell.micro, capacity=max(n, 1), contact=contact, **micro))
+
+
+def lattice(cell: Cell, n: int) -> np.ndarray:
+    """Return (n, 2) disc centres on a hexagonal lattice upstream of the deflector [m]."""
+    r = cell.part_types[0].radius
+    d = 2.0 * r + LATTICE_GAP
+    (x0, y0), (x1, y1) = cell.obstacles[2].points
+    half = 0.5 * cell.obstacles[2].thickness
+    y_max = cell.belts[0].width / 2 - r - 1e-4
+    pts: List[tuple] = []
+    row = 0
+    while len(pts) < n:
+        # rows from the deflector's far end upstream
+        x = x1 - (r + half) * math.sqrt(2.0) - 1e-3 - row * d * math.sqrt(3.0) / 2.0
+        if x < r:
+            raise ValueError(f'{n} discs do not fit upstream of the deflector')
+        y = -y_max + (0.5 * d if row % 2 else 0.0)
+        while y <= y_max and len(pts) < n:
+            # stay on the upstream side of the deflector line x + y = x0 + y0
+            if x + y < x0 + y0 - (r + half) * math.sqrt(2.0) - 1e-3:
+                pts.append((x, y))
+            y += d
+        row += 1
+    return np.array(pts)
+
+
+def _stats(samples_ns: np.ndarray) -> Dict[str, float]:
+    ms = samples_ns / 1e6
+    return {'mean_ms': float(ms.mean()), 'median_ms': float(np.median(ms)),
+            'p99_ms': float(np.percentile(ms, 99))}
+
+
+def jammed_sim(n: int, warmup: int, **kwargs) -> MicroSim:
+    """Return a MicroSim of the scene with ``n`` discs after ``warmup`` steps."""
+    cell = scene(n, **kwargs)
+    sim = MicroSim(cell, seed=cell.settings.seed)
+    pts = lattice(cell, n)
+    belt = cell.belts[0].speed
+    sim.spawn(0, pts[:, 0], pts[:, 1], 0.0, vx=belt)
+    sim.step(warmup)
+    return sim
+
+
+def time_ours(n: int, steps: int, warmup: int) -> Dict[str, float]:
+    """Time ``steps`` single steps of our simulator on the jam."""
+    sim = jammed_sim(n, warmup)
+    samples = np.zeros(steps, dtype=np.int64)
+    clock = time.perf_counter_ns
+    for k in range(steps):
+        t0 = clock()
+        sim.step(1)
+        samples[k] = clock() - t0
+    result = _stats(samples)
+    t0 = clock()
+    sim.step(steps)
+    result['batched_ms'] = (clock() - t0) / 1e6 / steps
+    result['max_penetration_mm'] = max_penetration(sim) * 1e3
+    return result
+
+
+def max_penetration(sim: MicroSim) -> float:
+    """Return the deepest disc-disc or disc-wall overlap of the scene's state [m]."""
+    view = sim.parts_view()
+    r = sim.cell.part_types[0].radius
+    pts = np.stack([view.x, view.y], axis=1)
+    deepest = 0.0
+    if len(view) > 1:
+        order = np.argsort(pts[:, 0])
+        p = pts[order]
+        for shift in range(1, 40):
+            d = np.hypot(*(p[shift:] - p[:-shift]).T)
+            deepest = max(deepest, float((2 * r - d).max(initial=0.0)))
+    for obstacle in sim.cell.obstacles:
+        (ax, ay), (bx, by) = obstacle.points
+        e = np.array([bx - ax, by - ay])
+        f = np.clip(((pts - (ax, ay)) @ e) / (e @ e), 0.0, 1.0)
+        d = np.hypot(*(pts - (np.array([ax, ay]) + f[:, None] * e)).T)
+        deepest = max(deepest, float((r + obstacle.thickness / 2 - d).max(initial=0.0)))
+    return deepest
+
+
+def pymunk_space(n: int):
+    """Return (space, belt drive function) of the scene in pymunk with ``n`` discs."""
+    import pymunk
+    import pymunk.batch
+
+    cell = scene(n)
+    part = cell.part_types[0]
+    belt = cell.belts[0]
+    dt = cell.settings.step
+    space = pymunk.Space()
+    space.collision_slop = cell.micro.penetration_slop
+    # pymunk multiplies the two shapes' coefficients: discs carry sqrt(pair value)
+    mu_pp = 0.5 * (part.friction_static + part.friction_sliding)
+    disc_mu = math.sqrt(mu_pp)
+    disc_e = math.sqrt(part.restitution)
+    for obstacle in cell.obstacles:
+        a, b = obstacle.points
+        seg = pymunk.Segment(space.static_body, a, b, obstacle.thickness / 2)
+        seg.friction = obstacle.friction / disc_mu
+        seg.elasticity = obstacle.restitution / disc_e
+        space.add(seg)
+    for x, y in lattice(cell, n):
+        body = pymunk.Body(part.mass, part.inertia)
+        body.position = (x, y)
+        body.velocity = (belt.speed, 0.0)
+        shape = pymunk.Circle(body, part.radius)
+        shape.friction = disc_mu
+        shape.elasticity = disc_e
+        space.add(body, shape)
+    fields = pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY
+    get_buf = pymunk.batch.Buffer()
+    set_buf = pymunk.batch.Buffer()
+    dv_max = belt.friction * cell.settings.gravity * dt
+    dw_max = dv_max * part.mass * (2.0 * part.radius / 3.0) / part.inertia
+    # the space's static body is iterated too: find its row once and keep it at rest
+    ids_buf = pymunk.batch.Buffer()
+    pymunk.batch.get_space_bodies(space, pymunk.batch.BodyFields.BODY_ID, ids_buf)
+    ids = np.frombuffer(ids_buf.int_buf(), dtype=np.uintp)
+    dynamic = ids != space.static_body.id
+    out = np.zeros(3 * ids.size)
+
+    def drive() -> None:
+        get_buf.clear()
+        pymunk.batch.get_space_bodies(space, fields, get_buf)
+        v = np.frombuffer(get_buf.float_buf(), dtype=np.float64).reshape(-1, 3)
+        dvx = belt.speed - v[:, 0]
+        dvy = -v[:, 1]
+        d = np.hypot(dvx, dvy)
+        f = np.minimum(1.0, dv_max / np.maximum(d, 1e-300))
+        res = out.reshape(-1, 3)
+        res[:, 0] = v[:, 0] + dvx * f
+        res[:, 1] = v[:, 1] + dvy * f
+        res[:, 2] = v[:, 2] - np.clip(v[:, 2], -dw_max, dw_max)
+        res[~dynamic] = 0.0
+        set_buf.set_float_buf(out)
+        pymunk.batch.set_space_bodies(space, fields, set_buf)
+
+    return space, drive, dt
+
+
+def time_pymunk(n: int, steps: int, warmup: int) -> Dict[str, float]:
+    """Time pymunk on the same jam: drive + ``space.step``, and ``space.step`` alone."""
+    space, drive, dt = pymunk_space(n)
+    for _ in range(warmup):
+        drive()
+        space.step(dt)
+    total = np.zeros(steps, dtype=np.int64)
+    step_only = np.zeros(steps, dtype=np.int64)
+    clock = time.perf_counter_ns
+    for k in range(steps):
+        t0 = clock()
+        drive()
+        t1 = clock()
+        space.step(dt)
+        t2 = clock()
+        total[k] = t2 - t0
+        step_only[k] = t2 - t1
+    result = {f'total_{k}': v for k, v in _stats(total).items()}
+    result.update({f'step_{k}': v for k, v in _stats(step_only).items()})
+    return result
+
+
+def stable(n: int, contact: str, step: float, duration: float, **micro) -> Dict[str, float]:
+    """Run the scene at ``step`` [s] without substeps; return whether it stayed accurate."""
+    cell = scene(n, contact=contact, step=step, **micro)
+    sim = MicroSim(cell, seed=1, auto_substeps=False, track_activity=False)
+    pts = lattice(cell, n)
+    sim.spawn(0, pts[:, 0], pts[:, 1], 0.0, vx=cell.belts[0].speed)
+    r = cell.part_types[0].radius
+    steps = int(round(duration / step))
+    chunk = max(1, steps // 20)
+    deepest = 0.0
+    fastest = 0.0
+    escaped = False
+    done = 0
+    while done < steps:
+        k = min(chunk, steps - done)
+        sim.step(k)
+        done += k
+        view = sim.parts_view()
+        if not np.all(np.isfinite(view.x)):
+            escaped = True
+            break
+        deepest = max(deepest, max_penetration(sim))
+        fastest = max(fastest, float(np.hypot(view.vx, view.vy).max()))
+        escaped |= bool(np.any(np.abs(view.y) > 0.25)) or bool(
+            np.any(view.x + view.y > 1.5 + r))
+    ok = (not escaped and deepest <= 0.1 * r and fastest <= 2.0 * cell.belts[0].speed)
+    return {'step': step, 'ok': ok, 'max_penetration_mm': deepest * 1e3,
+            'max_speed': fastest, 'escaped': escaped}
+
+
+STEP_LADDER = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 5e-6, 2e-6, 1e-6,
+               5e-7)
+
+
+def largest_stable_step(n: int, contact: str, duration: float, **micro) -> Dict:
+    """Return the largest step of :data:`STEP_LADDER` that passes :func:`stable`, and the runs."""
+    runs = []
+    for step in STEP_LADDER:
+        result = stable(n, contact, step, duration, **micro)
+        runs.append(result)
+        if result['ok']:
+            return {'largest_step': step, 'runs': runs}
+    return {'largest_step': None, 'runs': runs}
+
+
+def main(argv: List[str]) -> int:
+    """Run the benchmark; print a table or (``--json``) one JSON object."""
+    parser = argparse.ArgumentParser(prog='conveyor-twin bench micro', description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--json', action='store_true', help='print one JSON object')
+    parser.add_argument('--sizes', default=','.join(map(str, DEFAULT_SIZES)),
+                        help='comma-separated disc counts')
+    parser.add_argument('--steps', type=int, default=DEFAULT_STEPS, help='timed steps')
+    parser.add_argument('--warmup', type=int, default=DEFAULT_WARMUP, help='warm-up steps')
+    parser.add_argument('--skip-pymunk', action='store_true', help='time ours only')
+    parser.add_argument('--skip-stability', action='store_true',
+                        help='skip the penalty/impulse largest-step comparison')
+    parser.add_argument('--stability-n', type=int, default=100,
+                        help='discs in the largest-step comparison')
+    parser.add_argument('--stability-time', type=float, default=0.3,
+                        help='simulated time of each largest-step run [s]')
+    args = parser.parse_args(argv)
+    sizes = [int(s) for s in args.sizes.split(',') if s]
+    report: Dict = {'scene': str(SCENE.name), 'dt': 1e-3, 'steps': args.steps,
+                    'warmup': args.warmup, 'sizes': {}}
+    jammed_sim(10, 2)   # compile outside the timings
+    for n in sizes:
+        entry = {'ours': time_ours(n, args.steps, args.warmup)}
+        if not args.skip_pymunk:
+            entry['pymunk'] = time_pymunk(n, args.steps, args.warmup)
+            ours = entry['ours']['mean_ms']
+            entry['ratio_step'] = entry['pymunk']['step_mean_ms'] / ours
+            entry['ratio_total'] = entry['pymunk']['total_mean_ms'] / ours
+        report['sizes'][str(n)] = entry
+        if not args.json:
+            _print_size(n, entry)
+    if not args.skip_stability:
+        from conveyor_twin.micro.activity import pick_contact_stiffness
+        base = scene(args.stability_n)
+        pick = pick_contact_stiffness(base, seed=1, duration=0.2,
+                                      positions=lattice(base, args.stability_n))
+        report['penalty_stiffness'] = pick.stiffness
+        report['penalty_activity_ratio'] = pick.ratio
+        report['impulse'] = largest_stable_step(args.stability_n, 'impulse',
+                                                args.stability_time)
+        report['penalty'] = largest_stable_step(
+            args.stability_n, 'penalty', args.stability_time,
+            penalty_stiffness=pick.stiffness, penalty_damping=pick.damping)
+        if not args.json:
+            print(f'largest stable/accurate step, N = {args.stability_n}: impulse '
+                  f"{report['impulse']['largest_step']} s, penalty "
+                  f"{report['penalty']['largest_step']} s (k = {pick.stiffness:.3g} N/m picked "
+                  f'by activity, springs/least physical = {pick.ratio:.3g})')
+    if args.json:
+        print(json.dumps(report))
+    return 0
+
+
+def _print_size(n: int, entry: Dict) -> None:
+    o = entry['ours']
+    line = (f"N = {n:5d}  ours {o['mean_ms']:.3f} ms mean, {o['p99_ms']:.3f} p99 "
+            f"({o['batched_ms']:.3f} batched, max overlap {o['max_penetration_mm']:.3f} mm)")
+    if 'pymunk' in entry:
+        p = entry['pymunk']
+        line += (f" | pymunk step {p['step_mean_ms']:.3f} mean, {p['step_p99_ms']:.3f} p99; "
+                 f"total {p['total_mean_ms']:.3f} | ratio x{entry['ratio_step']:.2f} step, "
+                 f"x{entry['ratio_total']:.2f} total")
+    print(line, flush=True)
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))
