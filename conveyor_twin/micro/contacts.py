@@ -328,24 +328,26 @@ def detect(n, ptype, x, y, yaw, pt, gdim, cell_start, cell_items, part_cell, sta
         cx = c % gnx
         cy = c // gnx
         m = 0
+        xi = x[i]
+        yi = y[i]
+        gx0 = max(cx - 1, 0)
+        gx1 = min(cx + 1, gnx - 1)
         for gy in range(max(cy - 1, 0), min(cy + 2, gny)):
-            for gx in range(max(cx - 1, 0), min(cx + 2, gnx)):
-                g = gy * gnx + gx
-                for k in range(cell_start[g], cell_start[g + 1]):
-                    j = cell_items[k]
-                    if j <= i:
-                        continue
-                    dx = x[j] - x[i]
-                    dy = y[j] - y[i]
-                    rr = bri + pt[ptype[j], PT_BRAD]
-                    if dx * dx + dy * dy < rr * rr:
-                        # insertion sort by j: canonical order
-                        p = m
-                        while p > 0 and cand[p - 1] > j:
-                            cand[p] = cand[p - 1]
-                            p -= 1
-                        cand[p] = j
-                        m += 1
+            # the three cells of a row are contiguous in cell_items
+            row = gy * gnx
+            for k in range(cell_start[row + gx0], cell_start[row + gx1 + 1]):
+                j = cell_items[k]
+                dx = x[j] - xi
+                dy = y[j] - yi
+                rr = bri + pt[ptype[j], PT_BRAD]
+                if j > i and dx * dx + dy * dy < rr * rr:
+                    # insertion sort by j: canonical order
+                    p = m
+                    while p > 0 and cand[p - 1] > j:
+                        cand[p] = cand[p - 1]
+                        p -= 1
+                    cand[p] = j
+                    m += 1
         for p in range(m):
             nc = _pair(i, cand[p], ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx)
     for i in range(n):

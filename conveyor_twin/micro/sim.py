@@ -163,7 +163,8 @@ class MicroSim:
         # obstacles and grid
         self.shapes, self.shape_verts, self.shape_owner = obstacle_shapes(cell.obstacles)
         bounds = world_bounds(cell, self.shapes, region)
-        self.grid = build_grid(bounds, max_brad, self.cfg[CF_MAX_TRAVEL] * 2.0, self.shapes)
+        # contacts are all detected before any body moves: no margin needed
+        self.grid = build_grid(bounds, max_brad, 1e-9, self.shapes)
         cap = self.state.capacity
         self._cell_start = np.zeros(self.grid.cells + 1, dtype=np.int64)
         self._cell_items = np.zeros(cap, dtype=np.int64)
