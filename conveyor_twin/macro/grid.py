@@ -36,8 +36,11 @@ import numpy as np
 
 from conveyor_twin.cell.model import Actuator, Belt, Cell, Obstacle, Rect, Zone
 
-# Fluid cells within this many cells (Chebyshev) of a solid cell get the sliding constraint.
+# Fluid cells within this many cells (Chebyshev) of an actuator's solid cells get its sliding
+# constraint; for fixed obstacles the band is a parameter of rasterise_static.
 SLIDE_BAND_CELLS = 1
+# Cell velocities below this [m/s] are zero.
+VELOCITY_EPS = 1e-12
 
 
 @dataclass(frozen=True)
@@ -272,8 +275,10 @@ def _band(solid: np.ndarray, cells: int) -> np.ndarray:
     return grown & ~solid
 
 
-def rasterise_static(grid: Grid, obstacles: Sequence[Obstacle]):
+def rasterise_static(grid: Grid, obstacles: Sequence[Obstacle], band_cells: int = 1):
     """Rasterise fixed obstacles.
+
+    :param band_cells: width of the sliding band in cells (Chebyshev distance to the solid).
 
     :return: ``(solid, normal)``: ``(ny, nx)`` uint8 solid mask and ``(ny, nx, 2)`` float64
         outward normals on the sliding band (zero elsewhere).
@@ -292,7 +297,7 @@ def rasterise_static(grid: Grid, obstacles: Sequence[Obstacle]):
     for mask, d, nx_, ny_ in shapes:
         if not mask.any():
             continue
-        band = _band(mask, SLIDE_BAND_CELLS) & ~solid
+        band = _band(mask, band_cells) & ~solid
         take = band & (d < best)
         normal[take, 0] = nx_[take]
         normal[take, 1] = ny_[take]
@@ -386,8 +391,9 @@ def build_velocity(belt_idx: np.ndarray, belt_dir: np.ndarray, speeds: np.ndarra
                 if w > 0.0:
                     vx = w * normal_a[iy, ix, 0]
                     vy = w * normal_a[iy, ix, 1]
-            vc[iy, ix, 0] = vx
-            vc[iy, ix, 1] = vy
+            # Round-off of the projection (1e-16 m/s) must not open a boundary face.
+            vc[iy, ix, 0] = vx if abs(vx) > VELOCITY_EPS else 0.0
+            vc[iy, ix, 1] = vy if abs(vy) > VELOCITY_EPS else 0.0
     for iy in range(ny):
         for ix in range(nx + 1):
             if ix == 0:
