@@ -1,0 +1,170 @@
+#!/usr/bin/env bash
+# Build the development environment of conveyor_twin in .venv, from nothing, without any ROS
+# installed or sourced (ROS 2 Kilted comes from the PyPI wheels pinned in requirements.txt).
+#
+# Steps, each skipped when a stamp in .venv/.setup/ says its inputs did not change:
+#   1. check the tools (Python 3.11 with headers, cmake, make, C and C++ compilers);
+#   2. create .venv and pip-install requirements.txt;
+#   3. patch the wheels' exported CMake files (build-machine include paths;
+#      tools/patch_wheel_cmake.py);
+#   4. build msg_defs/ (conveyor_twin_msgs) with cmake + make in build/msg_defs and install it into
+#      the .venv prefix itself: Python package in .venv/lib/python3.11/site-packages, typesupport
+#      libraries in .venv/lib (on the LD_LIBRARY_PATH that ros-wheels-bootstrapper sets when the
+#      venv's python starts), share/ and the ament index in .venv/share;
+#   5. add .venv to AMENT_PREFIX_PATH of every start of the venv's python (a .pth file; the wheels
+#      only set LD_LIBRARY_PATH), so ament_index lookups find conveyor_twin_msgs and conveyor_twin;
+#   6. pip install -e . (the conveyor_twin package, console scripts in .venv/bin), plus setup.py's
+#      data_files (ament index marker, package.xml, cells) into .venv/share.
+#
+# Environment: PYTHON (interpreter to create .venv with; default python3.11, else python3),
+# CC / CXX (compilers), JOBS (parallel make jobs). Works with CI=true and no stdin.
+set -euo pipefail
+
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+VENV="$ROOT/.venv"
+STAMPS="$VENV/.setup"
+MSG_BUILD="$ROOT/build/msg_defs"
+export PIP_NO_INPUT=1 PIP_DISABLE_PIP_VERSION_CHECK=1
+START=$SECONDS
+
+say() { printf 'setup: %s\n' "$*"; }
+die() { printf 'setup: error: %s\n' "$*" >&2; exit 1; }
+elapsed() { printf '%ss' $((SECONDS - START)); }
+
+# The stamp of a step holds the hash of its inputs; a step runs when they differ.
+stamp_ok() { [[ -f "$STAMPS/$1" && "$(cat "$STAMPS/$1")" == "$2" ]]; }
+stamp_write() { mkdir -p "$STAMPS" && printf '%s\n' "$2" > "$STAMPS/$1"; }
+hash_files() { (cd "$ROOT" && sha256sum "$@" | sha256sum | cut -d' ' -f1); }
+hash_tree() {
+    (cd "$ROOT" && find "$@" -type f -print0 | LC_ALL=C sort -z | xargs -0 sha256sum \
+        | sha256sum | cut -d' ' -f1)
+}
+
+# pip prints one warning per package for each local index of this machine's pip.conf that does
+# not hold it; they are harmless, so keep them out of the log.
+quiet_pip() {
+    "$VENV/bin/python" -m pip "$@" < /dev/null 2>&1 \
+        | { grep -v "^WARNING: Location '.*' is ignored: it is neither a file nor a directory." \
+            || true; }
+}
+
+# 1. Tools -------------------------------------------------------------------------------------
+command -v cmake > /dev/null || die 'cmake is missing (needed to build msg_defs/): install cmake'
+command -v make > /dev/null || die 'make is missing (needed to build msg_defs/): install make'
+cc_found=''
+for cc in ${CC:-} cc gcc clang; do command -v "$cc" > /dev/null && { cc_found=$cc; break; }; done
+[[ -n "$cc_found" ]] || die 'no C compiler (cc, gcc or clang; or set CC): install gcc'
+cxx_found=''
+for cxx in ${CXX:-} c++ g++ clang++; do
+    command -v "$cxx" > /dev/null && { cxx_found=$cxx; break; }
+done
+[[ -n "$cxx_found" ]] || die 'no C++ compiler (c++, g++ or clang++; or set CXX): install g++'
+
+if [[ -z "${PYTHON:-}" ]]; then
+    if command -v python3.11 > /dev/null; then PYTHON=python3.11; else PYTHON=python3; fi
+fi
+command -v "$PYTHON" > /dev/null || die "$PYTHON not found: install Python 3.11 or set PYTHON"
+"$PYTHON" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' \
+    || die "$PYTHON is Python $("$PYTHON" -c 'import sys; print(sys.version.split()[0])'),"`
+          `" the ROS 2 wheels need 3.11: set PYTHON=/path/to/python3.11"
+python_h=$("$PYTHON" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')/Python.h
+[[ -f "$python_h" ]] || die "$python_h is missing: msg_defs/ compiles a Python extension;"`
+    `" install the Python 3.11 development headers (Debian/Ubuntu: python3.11-dev)"
+
+# 2. Virtual environment and requirements --------------------------------------------------------
+if [[ -d "$VENV" ]] && ! "$VENV/bin/python" -c '' < /dev/null 2> /dev/null; then
+    say "$VENV is broken (its interpreter does not start), recreating it"
+    rm -rf "$VENV"
+fi
+if [[ ! -d "$VENV" ]]; then
+    say "creating $VENV with $("$PYTHON" -c 'import sys; print(sys.executable)')"
+    "$PYTHON" -m venv "$VENV" \
+        || die "$PYTHON -m venv failed (Debian/Ubuntu: install python3.11-venv)"
+fi
+
+req_hash=$(hash_files requirements.txt)
+if stamp_ok requirements "$req_hash"; then
+    say 'requirements up to date'
+else
+    say 'installing requirements.txt into .venv (about a minute on a cold pip cache)'
+    quiet_pip install -q --progress-bar off -r "$ROOT/requirements.txt"
+    # The wheels' CMake files are rewritten by every install: patch them again.
+    "$VENV/bin/python" "$ROOT/tools/patch_wheel_cmake.py" < /dev/null
+    stamp_write requirements "$req_hash"
+    say "requirements installed ($(elapsed))"
+fi
+
+# 3./4. conveyor_twin_msgs --------------------------------------------------------------------
+SITE=$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])' \
+    < /dev/null)
+# Rebuilt when msg_defs/ changes, and when the wheels it links against (requirements) change.
+msg_hash=$(printf '%s %s %s' "$(hash_tree msg_defs)" "$req_hash" "$VENV" | sha256sum \
+    | cut -d' ' -f1)
+if stamp_ok msg_defs "$msg_hash" && [[ -d "$SITE/conveyor_twin_msgs" ]] \
+        && [[ -f "$VENV/share/ament_index/resource_index/packages/conveyor_twin_msgs" ]]; then
+    say 'conveyor_twin_msgs up to date'
+else
+    say 'building msg_defs/ (conveyor_twin_msgs) into .venv'
+    "$VENV/bin/python" "$ROOT/tools/patch_wheel_cmake.py" < /dev/null
+    rm -rf "$MSG_BUILD"
+    mkdir -p "$MSG_BUILD"
+    log="$MSG_BUILD/build.log"
+    jobs=${JOBS:-$(nproc 2> /dev/null || echo 2)}
+    # The wheels are found through the venv prefix; nothing of a system ROS is used.
+    if ! (
+        export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
+        unset PYTHONPATH
+        cmake -S "$ROOT/msg_defs" -B "$MSG_BUILD" \
+            -DCMAKE_INSTALL_PREFIX="$VENV" \
+            -DCMAKE_BUILD_TYPE=Release \
+            -DBUILD_TESTING=OFF \
+            -DCMAKE_C_COMPILER="$cc_found" \
+            -DCMAKE_CXX_COMPILER="$cxx_found" \
+            -DPython3_EXECUTABLE="$VENV/bin/python" \
+            -DPython3_FIND_VIRTUALENV=ONLY
+        make -C "$MSG_BUILD" -j"$jobs" install
+    ) < /dev/null > "$log" 2>&1; then
+        tail -n 40 "$log" >&2
+        die "building msg_defs/ failed; full log: $log"
+    fi
+    # The generated Python package must be where the venv's python imports from.
+    [[ -d "$SITE/conveyor_twin_msgs" ]] \
+        || die "msg_defs/ installed, but not into $SITE/conveyor_twin_msgs; see $log"
+    stamp_write msg_defs "$msg_hash"
+    say "conveyor_twin_msgs installed into .venv ($(elapsed))"
+fi
+
+# 5. AMENT_PREFIX_PATH --------------------------------------------------------------------------
+# ros-wheels-bootstrapper.pth re-executes the interpreter with LD_LIBRARY_PATH; nothing sets
+# AMENT_PREFIX_PATH. This .pth puts the venv prefix on it (first, once) at every start.
+pth="$SITE/conveyor_twin_ament_prefix.pth"
+pth_line='import os, sys; _p = os.environ.get("AMENT_PREFIX_PATH", ""); '`
+        `'sys.prefix in _p.split(os.pathsep) or os.environ.__setitem__("AMENT_PREFIX_PATH", '`
+        `'os.pathsep.join(filter(None, (sys.prefix, _p))))'
+if [[ ! -f "$pth" || "$(cat "$pth")" != "$pth_line" ]]; then
+    printf '%s\n' "$pth_line" > "$pth"
+    say "added $VENV to AMENT_PREFIX_PATH of the venv's python ($pth)"
+fi
+
+# 6. The conveyor_twin package --------------------------------------------------------------------
+# Data files (package.xml, ament marker, cell YAML files) are copied at install time, so they
+# are part of the hash.
+pkg_hash=$(hash_files setup.py setup.cfg package.xml resource/conveyor_twin \
+    $(cd "$ROOT" && ls conveyor_twin/cell/*.yaml 2> /dev/null))
+if stamp_ok package "$pkg_hash" && [[ -x "$VENV/bin/conveyor-twin" ]]; then
+    say 'conveyor_twin (editable) up to date'
+else
+    say 'installing conveyor_twin (pip install -e .)'
+    quiet_pip install -q --progress-bar off --no-deps -e "$ROOT"
+    # Editable installs do not install setup.py's data_files (pypa/setuptools#3399): install them
+    # (ament index marker, share/conveyor_twin/package.xml, cells) with setup.py's own list.
+    rm -rf "$VENV/share/conveyor_twin"
+    (cd "$ROOT" && PYTHONWARNINGS=ignore "$VENV/bin/python" setup.py -q install_data \
+        --install-dir "$VENV" < /dev/null > /dev/null)
+    [[ -f "$VENV/share/ament_index/resource_index/packages/conveyor_twin" ]] \
+        || die "the data files of setup.py were not installed into $VENV/share"
+    stamp_write package "$pkg_hash"
+    say "conveyor_twin installed ($(elapsed))"
+fi
+
+say "ready in $(elapsed): .venv/bin/conveyor-twin, .venv/bin/python -m pytest"
