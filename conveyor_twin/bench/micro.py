@@ -296,7 +296,7 @@ def main(argv: List[str]) -> int:
     if not args.skip_stability:
         from conveyor_twin.micro.activity import pick_contact_stiffness
         base = scene(args.stability_n)
-        pick = pick_contact_stiffness(base, seed=1, duration=0.2,
+        pick = pick_contact_stiffness(base, seed=1, duration=0.1, settle=0.3,
                                       positions=lattice(base, args.stability_n))
         report['penalty_stiffness'] = pick.stiffness
         report['penalty_activity_ratio'] = pick.ratio
