@@ -1,0 +1,195 @@
+"""Slow, readable reference of the contact kernel (near phase and impulse sweeps).
+
+Plain Python and numpy, written for clarity, not speed; the tests check the compiled kernels
+of :mod:`conveyor_twin.micro.collide` and :mod:`conveyor_twin.micro.contacts` against it.
+Shapes are ``(core vertices (nv, 2) [m], radius [m])`` as in ``collide``.
+"""
+
+import math
+from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
+
+Contact = Tuple[np.ndarray, float]   # (unit normal from B to A, depth [m])
+
+
+def _closest_on_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    ab = b - a
+    denom = ab @ ab
+    t = 0.0 if denom == 0.0 else min(max((p - a) @ ab / denom, 0.0), 1.0)
+    return a + t * ab
+
+
+def _edges(verts: np.ndarray):
+    for i in range(len(verts)):
+        yield verts[i], verts[(i + 1) % len(verts)]
+
+
+def _inside(p: np.ndarray, verts: np.ndarray) -> bool:
+    """True if p is inside the convex counter-clockwise polygon."""
+    if len(verts) < 3:
+        return False
+    return all((b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]) > 0.0
+               for a, b in _edges(verts))
+
+
+def _point_core(p: np.ndarray, verts: np.ndarray) -> Tuple[np.ndarray, float, bool]:
+    """Return (closest core point, distance, p inside the core)."""
+    if len(verts) == 1:
+        return verts[0], float(np.linalg.norm(p - verts[0])), False
+    best = None
+    for a, b in _edges(verts) if len(verts) > 2 else [(verts[0], verts[1])]:
+        q = _closest_on_segment(p, a, b)
+        d = float(np.linalg.norm(p - q))
+        if best is None or d < best[1]:
+            best = (q, d)
+    return best[0], best[1], _inside(p, verts)
+
+
+def _axes(verts: np.ndarray) -> List[np.ndarray]:
+    out = []
+    pairs = list(_edges(verts)) if len(verts) > 2 else [(verts[0], verts[1]),
+                                                        (verts[1], verts[0])]
+    for a, b in pairs:
+        e = b - a
+        out.append(np.array([e[1], -e[0]]) / np.linalg.norm(e))
+    return out
+
+
+def collide_ref(a: Tuple[np.ndarray, float], b: Tuple[np.ndarray, float]) -> Optional[Contact]:
+    """Return the deepest contact of two rounded convex shapes, or None if they do not touch.
+
+    Separated cores: the closest points of the cores, depth = radii - distance. Overlapping
+    cores (boxes, polygons): the separating-axis test over every edge normal, depth = least
+    overlap along an axis + radii.
+    """
+    (va, ra), (vb, rb) = a, b
+    va = np.asarray(va, dtype=float)
+    vb = np.asarray(vb, dtype=float)
+    if len(va) == 1 or len(vb) == 1:
+        flip = len(va) != 1
+        p, core, r = (vb[0], va, ra + rb) if flip else (va[0], vb, ra + rb)
+        q, d, inside = _point_core(p, core)
+        if inside:
+            # least exit through a face: the largest (least negative) face separation
+            separation, normal = max((((p - e0) @ n, n) for (e0, _), n in
+                                      zip(_edges(core), _axes(core))), key=lambda sn: sn[0])
+            depth = r - separation
+        else:
+            if d >= r:
+                return None
+            normal = (p - q) / d if d > 0 else np.array([1.0, 0.0])
+            depth = r - d
+        return (-normal if flip else normal), float(depth)
+    # polygon-polygon: distance between cores if apart
+    segs_a = list(_edges(va)) if len(va) > 2 else [(va[0], va[1])]
+    segs_b = list(_edges(vb)) if len(vb) > 2 else [(vb[0], vb[1])]
+    best = None
+    for a0, a1 in segs_a:
+        for b0, b1 in segs_b:
+            for p, s0, s1, sign in ((a0, b0, b1, 1.0), (a1, b0, b1, 1.0),
+                                    (b0, a0, a1, -1.0), (b1, a0, a1, -1.0)):
+                q = _closest_on_segment(p, s0, s1)
+                d = float(np.linalg.norm(p - q))
+                if best is None or d < best[0]:
+                    best = (d, sign * (p - q))
+    apart = not any(_inside(p, vb) for p in va) and not any(_inside(p, va) for p in vb) and \
+        best[0] > 1e-9 and not _segments_cross(segs_a, segs_b)
+    if apart:
+        if best[0] >= ra + rb:
+            return None
+        return best[1] / best[0], float(ra + rb - best[0])
+    # overlapping cores: SAT
+    least = None
+    for axis in _axes(va) + _axes(vb):
+        pa = va @ axis
+        pb = vb @ axis
+        overlap = min(pa.max() - pb.min(), pb.max() - pa.min())
+        if least is None or overlap < least[0]:
+            # normal from B to A along the axis
+            sign = 1.0 if pa.mean() - pb.mean() >= 0.0 else -1.0
+            least = (overlap, sign * axis)
+    return least[1], float(least[0] + ra + rb)
+
+
+def _segments_cross(segs_a, segs_b) -> bool:
+    def orient(p, q, r):
+        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+    for a0, a1 in segs_a:
+        for b0, b1 in segs_b:
+            if (orient(a0, a1, b0) * orient(a0, a1, b1) < 0
+                    and orient(b0, b1, a0) * orient(b0, b1, a1) < 0):
+                return True
+    return False
+
+
+def friction_ref(mu_s: float, mu_k: float, v_t: float, speed: float) -> float:
+    """Seed 002: static at rest, sliding from ``v_t`` on, linear in between."""
+    return mu_k if speed >= v_t else mu_s + (mu_k - mu_s) * speed / v_t
+
+
+def cross(r: np.ndarray, v: np.ndarray) -> float:
+    """z of the planar cross product."""
+    return float(r[0] * v[1] - r[1] * v[0])
+
+
+def impulse_ref(va, wa, ma_inv, ia_inv, ra, vb, wb, mb_inv, ib_inv, rb, n, e, mu_s, mu_k, v_t):
+    """Return (va, wa, vb, wb) after one contact's normal then friction impulse."""
+    va, vb, ra, rb, n = (np.array(v, dtype=float) for v in (va, vb, ra, rb, n))
+
+    def point_velocity(v, w, r):
+        return v + w * np.array([-r[1], r[0]])
+
+    u = point_velocity(va, wa, ra) - point_velocity(vb, wb, rb)
+    un = u @ n
+    if un >= 0.0:
+        return va, wa, vb, wb
+    e = e if -un > 0.02 else 0.0
+    k = ma_inv + mb_inv + ia_inv * cross(ra, n) ** 2 + ib_inv * cross(rb, n) ** 2
+    jn = -(1.0 + e) * un / k
+    va, wa = va + jn * n * ma_inv, wa + ia_inv * cross(ra, jn * n)
+    vb, wb = vb - jn * n * mb_inv, wb - ib_inv * cross(rb, jn * n)
+    t = np.array([-n[1], n[0]])
+    ut = (point_velocity(va, wa, ra) - point_velocity(vb, wb, rb)) @ t
+    kt = ma_inv + mb_inv + ia_inv * cross(ra, t) ** 2 + ib_inv * cross(rb, t) ** 2
+    bound = friction_ref(mu_s, mu_k, v_t, abs(ut)) * jn
+    jt = min(max(-ut / kt, -bound), bound)
+    va, wa = va + jt * t * ma_inv, wa + ia_inv * cross(ra, jt * t)
+    vb, wb = vb - jt * t * mb_inv, wb - ib_inv * cross(rb, jt * t)
+    return va, wa, vb, wb
+
+
+def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np.ndarray,
+               i_inv: np.ndarray, key: np.ndarray, passes: int) -> None:
+    """Apply the impulse sweeps of :func:`conveyor_twin.micro.contacts.solve_impulses`.
+
+    :param contacts: dicts with ``a``, ``b`` (-1: fixed), ``n``, ``ra``, ``rb``, ``e``,
+        ``mu_s``, ``mu_k``, ``v_t``, ``bv``, ``bw``. :param v: (n, 2) velocities, in place.
+    """
+    for sweep in range(passes):
+        shock = passes >= 2 and sweep == passes - 1
+        for c in contacts:
+            a, b = c['a'], c['b']
+            e = c['e'] if sweep == 0 else 0.0
+            ma, ia = m_inv[a], i_inv[a]
+            if b >= 0:
+                mb, ib = m_inv[b], i_inv[b]
+                if shock:
+                    if key[a] > key[b]:
+                        ma, ia = 0.0, 0.0
+                    else:
+                        mb, ib = 0.0, 0.0
+                v[a], w[a], v[b], w[b] = impulse_ref(v[a], w[a], ma, ia, c['ra'], v[b], w[b],
+                                                     mb, ib, c['rb'], c['n'], e, c['mu_s'],
+                                                     c['mu_k'], c['v_t'])
+            else:
+                v[a], w[a], _, _ = impulse_ref(v[a], w[a], ma, ia, c['ra'], c['bv'], c['bw'],
+                                               0.0, 0.0, c['rb'], c['n'], e, c['mu_s'],
+                                               c['mu_k'], c['v_t'])
+
+
+def box_core(x: float, y: float, yaw: float, length: float, width: float) -> np.ndarray:
+    """Return the counter-clockwise corners of a box [m]."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    local = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [length / 2, width / 2]
+    return local @ np.array([[c, s], [-s, c]]) + [x, y]
