@@ -1,0 +1,43 @@
+"""Penalty (spring-damper) contacts, the activity metric and the stiffness picker."""
+
+import numpy as np
+import pytest
+
+from conveyor_twin.micro import MicroSim
+from conveyor_twin.micro.activity import pick_contact_stiffness, spring_ratio
+from conveyor_twin.micro.sim import penalty_substep
+from test.micro.conftest import disc, make_cell, wall
+
+
+def test_penalty_head_on_conserves_momentum_and_separates():
+    # undamped spring contact between equal discs is elastic: velocities swap
+    cell = make_cell(part_types=(disc(),), friction=0.0, contact='penalty',
+                     penalty_stiffness=1e5, penalty_damping=0.0)
+    sim = MicroSim(cell, seed=0)
+    sim.spawn(0, [0.5, 0.52], 0.0, 0.0, vx=[0.5, -0.5])
+    assert sim.substeps == 0
+    sim.step(100)
+    assert sim.substeps == int(np.ceil(cell.settings.step / penalty_substep(cell, 1e5, 0.0)))
+    v = sim.parts_view()
+    assert v.vx.sum() == pytest.approx(0.0, abs=1e-12)
+    # explicit integration at omega h = 0.5: exit speed within a few per cent
+    assert v.vx[0] == pytest.approx(-0.5, rel=5e-2) and v.vx[1] == pytest.approx(0.5, rel=5e-2)
+    act = sim.activity()
+    # the spring stored and returned the kinetic energy: activity 2 * (1/2 m v^2) * 2 parts
+    assert act['contact_springs'] == pytest.approx(2 * 0.5 * 0.01 * 0.25 * 2, rel=0.1)
+    assert act['contact_dampers'] == 0.0
+
+
+def test_stiffer_springs_are_less_active_in_a_resting_jam():
+    cell = make_cell(speed=0.3, obstacles=(wall('stop', (0.6, -0.25), (0.6, 0.25),
+                                                thickness=0.01),))
+    positions = np.array([[0.58 - 0.0102 * k, 0.0] for k in range(8)])
+    picks = pick_contact_stiffness(cell, seed=0, duration=0.05, settle=0.1,
+                                   positions=positions, stiffness=1e3, fraction=0.01)
+    assert picks.ratio <= 0.01
+    ks = [k for k, _ in picks.trials]
+    ratios = [r for _, r in picks.trials]
+    assert ks == sorted(ks)
+    if len(ratios) > 1:
+        assert ratios[-1] < ratios[0]
+    assert spring_ratio(picks.activity) == picks.ratio
