@@ -83,7 +83,7 @@ AS_YMAX = 13
 AS_COLUMNS = 14
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def friction_coefficient(mu_s, mu_k, v_t, speed):
     """Return seed 002's friction coefficient at tangential ``speed`` [m/s]."""
     if speed >= v_t:
@@ -91,7 +91,7 @@ def friction_coefficient(mu_s, mu_k, v_t, speed):
     return mu_s + (mu_k - mu_s) * (speed / v_t)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def impulse_response(vax, vay, wa, ima, iia, rax, ray, vbx, vby, wb, imb, iib, rbx, rby,
                      nx, ny, e, mu_s, mu_k, v_t):
     """Return the velocities after one contact's impulses and the impulses themselves.
@@ -203,7 +203,7 @@ CT_BW = 13
 CT_COLUMNS = 14
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _record(nc, ct, cidx, a, b, px, py, ax, ay, bx, by, nx, ny, depth, e, mu_s, mu_k, v_t,
             bvx, bvy, bw):
     ct[nc, CT_NX] = nx
@@ -348,8 +348,36 @@ def detect(n, ptype, x, y, yaw, pt, gdim, cell_start, cell_items, part_cell, sta
                         p -= 1
                     cand[p] = j
                     m += 1
+        ti = ptype[i]
+        disc_i = pt[ti, PT_SHAPE] == SHAPE_DISC
         for p in range(m):
-            nc = _pair(i, cand[p], ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx)
+            j = cand[p]
+            tj = ptype[j]
+            if disc_i and pt[tj, PT_SHAPE] == SHAPE_DISC:
+                # disc-disc, the common case, written out (same arithmetic as circle_circle)
+                dx = xi - x[j]
+                dy = yi - y[j]
+                rsum = pt[ti, PT_RADIUS] + pt[tj, PT_RADIUS]
+                d2 = dx * dx + dy * dy
+                if d2 >= rsum * rsum or nc >= ct.shape[0]:
+                    continue
+                d = math.sqrt(d2)
+                if d > 0.0:
+                    nx = dx / d
+                    ny = dy / d
+                else:
+                    nx = 1.0
+                    ny = 0.0
+                depth = rsum - d
+                rb = pt[tj, PT_RADIUS] - 0.5 * depth
+                _record(nc, ct, cidx, i, j, x[j] + nx * rb, y[j] + ny * rb, xi, yi, x[j], y[j],
+                        nx, ny, depth, 0.5 * (pt[ti, PT_E] + pt[tj, PT_E]),
+                        0.5 * (pt[ti, PT_MU_S] + pt[tj, PT_MU_S]),
+                        0.5 * (pt[ti, PT_MU_K] + pt[tj, PT_MU_K]),
+                        0.5 * (pt[ti, PT_V_T] + pt[tj, PT_V_T]), 0.0, 0.0, 0.0)
+                nc += 1
+            else:
+                nc = _pair(i, j, ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx)
     for i in range(n):
         bri = pt[ptype[i], PT_BRAD]
         c = part_cell[i]
@@ -360,6 +388,44 @@ def detect(n, ptype, x, y, yaw, pt, gdim, cell_start, cell_items, part_cell, sta
                 continue
             off = int(shp[s, SH_OFF])
             nv = int(shp[s, SH_NV])
+            if nv == 2 and pt[ptype[i], PT_SHAPE] == SHAPE_DISC:
+                # disc-capsule, the common case, written out (as circle_segment)
+                ax = shp_verts[off, 0]
+                ay = shp_verts[off, 1]
+                ex = shp_verts[off + 1, 0] - ax
+                ey = shp_verts[off + 1, 1] - ay
+                l2 = ex * ex + ey * ey
+                f = 0.0
+                if l2 > 0.0:
+                    f = min(max(((x[i] - ax) * ex + (y[i] - ay) * ey) / l2, 0.0), 1.0)
+                qx = ax + f * ex
+                qy = ay + f * ey
+                dx = x[i] - qx
+                dy = y[i] - qy
+                rb = shp[s, SH_R]
+                rsum = pt[ptype[i], PT_RADIUS] + rb
+                d2 = dx * dx + dy * dy
+                if d2 >= rsum * rsum or nc >= ct.shape[0]:
+                    continue
+                d = math.sqrt(d2)
+                if d > 0.0:
+                    nx = dx / d
+                    ny = dy / d
+                elif l2 > 0.0:
+                    nx = ey / math.sqrt(l2)
+                    ny = -ex / math.sqrt(l2)
+                else:
+                    nx = 1.0
+                    ny = 0.0
+                depth = rsum - d
+                ti = ptype[i]
+                mu = shp[s, SH_MU]
+                ratio = pt[ti, PT_MU_S] / pt[ti, PT_MU_K] if pt[ti, PT_MU_K] > 0.0 else 1.0
+                _record(nc, ct, cidx, i, -1, qx + nx * (rb - 0.5 * depth),
+                        qy + ny * (rb - 0.5 * depth), x[i], y[i], 0.0, 0.0, nx, ny, depth,
+                        shp[s, SH_E], mu * ratio, mu, pt[ti, PT_V_T], 0.0, 0.0, 0.0)
+                nc += 1
+                continue
             nc = _fixed(i, ptype, x, y, yaw, pt, va, shp_verts[off:off + nv], nv,
                         shp[s, SH_R], 0.0, 0.0, 0.0, 0.0, 0.0, shp[s, SH_E], shp[s, SH_MU],
                         out, nc, ct, cidx)
