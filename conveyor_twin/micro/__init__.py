@@ -5,9 +5,7 @@ modules. Imports numpy and numba only (no ROS).
 """
 
 from conveyor_twin.micro._cache import drop_stale_caches
-
 drop_stale_caches()
-
 from conveyor_twin.micro.errors import (CapacityError, MicroError,  # noqa: E402
                                         SpawnOverlapError)
 from conveyor_twin.micro.sim import EdgeEvents, MicroSim  # noqa: E402

@@ -64,7 +64,7 @@ def circle_circle(ax, ay, ra, bx, by, rb, out):
 
 @njit(cache=True)
 def circle_segment(px, py, ra, v, rb, out):
-    """Contact of a circle (centre p, radius ra) with the capsule ``v[0]``-``v[1]`` of radius rb."""
+    """Contact of a circle (centre p, radius ra) with the capsule ``v[0]``-``v[1]`` (radius rb)."""
     ex = v[1, 0] - v[0, 0]
     ey = v[1, 1] - v[0, 1]
     l2 = ex * ex + ey * ey

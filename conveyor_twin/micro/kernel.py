@@ -20,10 +20,10 @@ import math
 
 from numba import njit
 
-from conveyor_twin.micro.actuators import AP_LENGTH, AP_WIDTH, actuator_shapes
-from conveyor_twin.micro.contacts import (A_INERTIA, MODE_PENALTY, MP_DT, MP_TRACK,
-                                          build_grid, correct_positions, detect,
-                                          penalty_forces, solve_impulses)
+from conveyor_twin.micro.actuators import actuator_shapes, AP_LENGTH, AP_WIDTH
+from conveyor_twin.micro.contacts import (A_INERTIA, build_grid, correct_positions, detect,
+                                          MODE_PENALTY, MP_DT, MP_TRACK, penalty_forces,
+                                          solve_impulses)
 from conveyor_twin.micro.drive import belt_drive, belt_key, ramp
 from conveyor_twin.micro.sensors import update_barriers
 from conveyor_twin.micro.sinks import leave

@@ -124,7 +124,8 @@ def _edge_fraction(pt, t, x0, y0, yaw0, x1, y1, yaw1, lb, b):
 @njit(cache=True)
 def _near(pt, t, px, py, lb, b):
     r = pt[t, PT_BRAD]
-    return not (px + r < min(lb[b, LB_AX], lb[b, LB_BX]) or px - r > max(lb[b, LB_AX], lb[b, LB_BX])
+    return not (px + r < min(lb[b, LB_AX], lb[b, LB_BX])
+                or px - r > max(lb[b, LB_AX], lb[b, LB_BX])
                 or py + r < min(lb[b, LB_AY], lb[b, LB_BY])
                 or py - r > max(lb[b, LB_AY], lb[b, LB_BY]))
 

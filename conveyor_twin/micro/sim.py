@@ -16,7 +16,7 @@ bit-identical states (:meth:`MicroSim.state_bytes`).
 
 import hashlib
 import math
-from typing import Dict, NamedTuple, Optional, Sequence, Tuple, Union
+from typing import Dict, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -25,26 +25,24 @@ from conveyor_twin.micro.actuators import actuator_arrays, actuator_shapes, actu
 from conveyor_twin.micro.contacts import (A_BELT, A_COLUMNS, A_CONTACT_FRICTION, A_DAMPER,
                                           A_INERTIA, A_SPRING, MODE_IMPULSE, MODE_PENALTY,
                                           MP_COLUMNS, MP_CORRECTION, MP_DAMPING, MP_DT,
-                                          MP_FLOOR_MU, MP_GRAVITY, MP_SLOP, MP_STIFFNESS,
-                                          MP_TRACK, scratch)
-from conveyor_twin.micro.drive import BT_DV, FLOOR_FRICTION, belt_table
+                                          MP_FLOOR_MU, MP_GRAVITY, MP_SLOP, MP_STIFFNESS, MP_TRACK,
+                                          scratch)
+from conveyor_twin.micro.drive import belt_table, BT_DV, FLOOR_FRICTION
 from conveyor_twin.micro.errors import CapacityError, SpawnOverlapError
 from conveyor_twin.micro.geometry import build_grid, obstacle_shapes, world_bounds
-from conveyor_twin.micro.kernel import (AV_LIMIT, AV_POSITION, AV_PREVIOUS, AV_SUB,
-                                        AV_TARGET, BV_LIMIT, BV_SPEED, BV_TARGET, CF_AUTO_SUB,
-                                        CF_COLUMNS, CF_DT, CF_FLOOR_MU, CF_MAX_SUB,
-                                        CF_MAX_TRAVEL, CF_MODE, CF_PASSES, CF_PENALTY_DT,
-                                        run_steps)
-from conveyor_twin.micro.sensors import (EV_BARRIER, EV_BLOCKED, EV_FLOAT_COLUMNS,
-                                         EV_FRACTION, EV_INT_COLUMNS, EV_PART, EV_STEP,
-                                         EV_TIME, barrier_table)
-from conveyor_twin.micro.sinks import OB_ROWS, RG_SIZE, remove_marked
-from conveyor_twin.micro.sources import (SS_COLUMNS, place, seed_streams, source_table)
-from conveyor_twin.micro.state import (C_CONTACTS_FULL, C_ENTERED, C_EVENTS, C_EVENTS_DROPPED, C_N,
-                                       C_NEXT_ID, C_OUTBOX, C_REGION_LEFT, C_REMOVED, C_STEP,
-                                       C_SUBSTEPS, C_SUBSTEPS_CAPPED, PartState, PartsView,
-                                       part_table, SHAPE_DISC, PT_SHAPE, PT_RADIUS, PT_HL,
-                                       PT_HW, PT_BRAD, PT_MASS)
+from conveyor_twin.micro.kernel import (AV_LIMIT, AV_POSITION, AV_PREVIOUS, AV_SUB, AV_TARGET,
+                                        BV_LIMIT, BV_SPEED, BV_TARGET, CF_AUTO_SUB, CF_COLUMNS,
+                                        CF_DT, CF_FLOOR_MU, CF_MAX_SUB, CF_MAX_TRAVEL, CF_MODE,
+                                        CF_PASSES, CF_PENALTY_DT, run_steps)
+from conveyor_twin.micro.sensors import (barrier_table, EV_BARRIER, EV_BLOCKED, EV_FLOAT_COLUMNS,
+                                         EV_FRACTION, EV_INT_COLUMNS, EV_PART, EV_STEP, EV_TIME)
+from conveyor_twin.micro.sinks import OB_ROWS, remove_marked, RG_SIZE
+from conveyor_twin.micro.sources import place, seed_streams, source_table, SS_COLUMNS
+from conveyor_twin.micro.state import (C_CONTACTS_FULL, C_ENTERED, C_EVENTS,
+                                       C_EVENTS_DROPPED, C_N, C_NEXT_ID, C_OUTBOX,
+                                       C_REGION_LEFT, C_REMOVED, C_STEP, C_SUBSTEPS,
+                                       C_SUBSTEPS_CAPPED, part_table, PartState, PartsView,
+                                       PT_BRAD)
 
 # Events buffer entries; edges beyond it between two drains are counted as dropped.
 EVENT_CAPACITY = 4096
@@ -199,8 +197,9 @@ class MicroSim:
                       self.act_verts, self.grid.gpar, self.grid.gdim, self._cell_start,
                       self._cell_items, self._part_cell, self.grid.static_start,
                       self.grid.static_items, self.shapes, self.shape_verts, self._cand,
-                      self._va, self._vb, self._out, self._ct, self._cidx, self.acc, self.src, self.src_next,
-                      self.src_state, self.rng, self.sinks, self.sink_count,
+                      self._va, self._vb, self._out, self._ct, self._cidx, self.acc,
+                      self.src, self.src_next, self.src_state, self.rng, self.sinks,
+                      self.sink_count,
                       self.region_array, self._ob_id, self._ob_type, self._ob_P, self.lb,
                       self.blocked, self.edge_count, self.last_part, self._ev_i, self._ev_f)
 
@@ -297,7 +296,8 @@ class MicroSim:
         """
         t = int(part_type)
         if not 0 <= t < len(self.cell.part_types):
-            raise IndexError(f'part type index {t} outside 0..{len(self.cell.part_types) - 1}')
+            last = len(self.cell.part_types) - 1
+            raise IndexError(f'part type index {t} outside 0..{last}')
         arrays = np.broadcast_arrays(*(np.atleast_1d(np.asarray(a, dtype=np.float64))
                                        for a in (x, y, yaw, vx, vy, wz)))
         count = arrays[0].size

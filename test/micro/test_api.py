@@ -68,8 +68,8 @@ def test_pusher_imparts_an_impulse_and_stopper_holds():
     stopper = Actuator(name='st', kind='stopper', base=(1.0, 0.0), axis=(0.0, 1.0),
                        length=0.5, width=0.01, position_range=(0.0, 0.008), max_speed=0.1,
                        initial_position=0.0, engage_height=0.004)
-    cell = make_cell(part_types=(disc(restitution=0.0),), speed=0.0, actuators=(pusher,
-                                                                                 stopper))
+    cell = make_cell(part_types=(disc(restitution=0.0),), speed=0.0,
+                     actuators=(pusher, stopper))
     sim = MicroSim(cell, seed=0)
     sim.spawn(0, 0.5, 0.0, 0.0)
     sim.set_actuator_target(0, 0.4)

@@ -1,7 +1,5 @@
 """A part sliding along a deflector, and a jam at the deflector."""
 
-import math
-
 import numpy as np
 import pytest
 

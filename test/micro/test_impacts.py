@@ -20,9 +20,9 @@ def closed_form(m1, m2, u1, u2, e):
 @pytest.mark.parametrize('e', [0.0, 0.5, 1.0])
 def test_head_on_simulated(e):
     m1, m2, r = 0.01, 0.03, 0.005
-    cell = make_cell(part_types=(disc(mass=m1, restitution=e), disc(mass=m2, restitution=e,
-                                                                   name='heavy')),
-                     friction=0.0)
+    light = disc(mass=m1, restitution=e)
+    heavy = disc(mass=m2, restitution=e, name='heavy')
+    cell = make_cell(part_types=(light, heavy), friction=0.0)
     sim = MicroSim(cell, seed=0)
     sim.spawn(0, 0.5, 0.0, 0.0, vx=1.0)
     sim.spawn(1, 0.53, 0.0, 0.0, vx=-0.5)

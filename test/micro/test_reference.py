@@ -7,9 +7,9 @@ import pytest
 
 from conveyor_twin.micro import MicroSim
 from conveyor_twin.micro.collide import box_vertices, collide
-from conveyor_twin.micro.contacts import (CT_BVX, CT_BVY, CT_BW, CT_E, CT_MU_K, CT_MU_S,
-                                          CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY,
-                                          CT_V_T, build_grid, detect, solve_impulses)
+from conveyor_twin.micro.contacts import (build_grid, CT_BVX, CT_BVY, CT_BW, CT_E, CT_MU_K,
+                                          CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY,
+                                          CT_V_T, detect, solve_impulses)
 from conveyor_twin.micro.reference import box_core, collide_ref, sweeps_ref
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
 from test.micro.conftest import box, disc, make_cell, wall
