@@ -6,23 +6,30 @@ velocity [m/s] added to the belt velocity on every face.
 Discretisation:
 
 - Mollifier ``eta``: the separable product of two 1D kernels
-  ``w_k = (1 - (k h / delta)^2)^3`` for ``|k| h < delta`` (delta = ``mollifier_width``, default two
-  cells: taps 0.42, 1, 0.42), applied as a *normalised* convolution over fluid cells only,
-  ``phi = eta * (m rho) / eta * m`` with ``m`` the fluid mask. Solid cells and the outside of the
-  grid are therefore neither empty nor full: they are ignored (a Neumann-like wall), so a wall
-  does not attract or repel material by itself. ``eta * m`` is precomputed when solids change.
-- Gradient on a face: the normal component is the two-cell difference of ``phi``; the tangential
-  component the mean of the two cells' central differences.
-- ``H`` on a face: 1 if either neighbouring cell has ``rho >= rho_max`` (the face between a full
-  and a free cell must push the full one out), 0 otherwise. Faces touching a solid cell and the
-  domain edges get no operator velocity.
-- Cost control: the operator is evaluated only inside the bounding box of cells with
-  ``rho >= rho_max`` grown by the stencil, and skipped when there is none.
+  ``w_k = (1 - (k h / delta)^2)^3`` for ``|k| h < delta`` (delta = ``mollifier_width``, default
+  two cells: taps 0.23, 0.54, 0.23), applied to the gradient: ``grad(eta * rho)`` is computed as
+  ``eta * grad(rho)`` from the face differences of ``rho``, which are zero across faces touching
+  a solid cell and outside the grid. A wall therefore has no density of its own (no spurious
+  push into or away from it); in the open both forms are the same.
+- Gradient on a face: the normal component is the mollified face difference; the tangential
+  component the mean of the four mollified differences around the face.
+- ``H`` on a face: 1 if either neighbouring cell has ``rho >= rho_max (1 - H_TOLERANCE)`` (the
+  face between a full and a free cell must push the full one out), 0 otherwise. Faces touching
+  a solid cell and the domain edges get no operator velocity.
+- Monotonicity: a face pushes only down its own density difference (the sign of the mollified
+  gradient must agree with ``rho_R - rho_L``; otherwise the face gets no operator velocity).
+  Without this, the mollified gradient of a pattern of period about ``2 delta`` has the wrong
+  sign, and since ``|grad phi|`` is huge in SI units the normalised operator pushes at full speed
+  ``eps`` *into* density peaks (observed: 25-60 rho_max spikes with a 5-cell mollifier).
+- Cost control: the operator is evaluated only, row by row, around the cells with
+  ``rho >= rho_max`` (grown by the stencil), and skipped when there is none.
 
 In SI units ``|grad phi|`` is about ``rho_max / h`` (1e6 /m^3 for 10 mm spacers on a 1 cm grid),
 so the normalisation makes ``I`` a push of speed ``eps`` down the density gradient wherever the
-density is at its maximum; ``eps`` must exceed the belt speed for the operator to hold the
-density at ``rho_max`` against a wall (see :mod:`conveyor_twin.macro.solver`).
+density is at its maximum. Alone, this holds the density near ``rho_max`` only approximately (up
+to about 1.9 rho_max in a stopper queue: the push switches on only above rho_max, in whatever
+direction the local gradient happens to point); :class:`MacroSim` therefore also applies the
+capped variant's receiver-capacity cut to the total flux by default (``guard=True``).
 """
 
 import math
@@ -48,160 +55,181 @@ def mollifier_weights(h: float, width: float) -> np.ndarray:
     return w / w.sum()
 
 
-@njit(cache=True)
-def mask_convolution(solid: np.ndarray, w: np.ndarray, tmp: np.ndarray,
-                     den: np.ndarray) -> None:
-    """Fill ``den = eta * m`` (``m`` = 1 on fluid cells) over the whole grid."""
-    ny, nx = solid.shape
-    r = (w.size - 1) // 2
-    for j in range(ny):
-        for i in range(nx):
-            s = 0.0
-            for k in range(-r, r + 1):
-                ii = i + k
-                if 0 <= ii < nx and solid[j, ii] == 0:
-                    s += w[k + r]
-            tmp[j, i] = s
-    for j in range(ny):
-        for i in range(nx):
-            s = 0.0
-            for k in range(-r, r + 1):
-                jj = j + k
-                if 0 <= jj < ny:
-                    s += w[k + r] * tmp[jj, i]
-            den[j, i] = s
+@njit(cache=True, inline='always')
+def _face_row_range(rng: np.ndarray, f: int, ny: int):
+    """Return the column range ``[a, b)`` of y-face row ``f``: union of its two cell rows."""
+    a = rng[min(f, ny - 1), 0]
+    b = rng[min(f, ny - 1), 1]
+    if f > 0:
+        a2 = rng[f - 1, 0]
+        b2 = rng[f - 1, 1]
+        if b2 > a2:
+            if b > a:
+                a = min(a, a2)
+                b = max(b, b2)
+            else:
+                a = a2
+                b = b2
+    return a, b
 
 
 @njit(cache=True)
-def full_box(rho: np.ndarray, solid: np.ndarray, rho_max: float, box: np.ndarray) -> bool:
-    """Store the bounding box ``[iy0, iy1, ix0, ix1)`` of cells with ``rho >= rho_max``.
+def restore_rows(wx: np.ndarray, wy: np.ndarray, ux: np.ndarray, uy: np.ndarray,
+                 rng: np.ndarray) -> None:
+    """Reset the total face velocities of the work region ``rng`` to the belt field."""
+    ny = ux.shape[0]
+    for j in range(ny):
+        for f in range(rng[j, 0], rng[j, 1] + 1 if rng[j, 1] > rng[j, 0] else rng[j, 0]):
+            wx[j, f] = ux[j, f]
+    for f in range(ny + 1):
+        a, b = _face_row_range(rng, f, ny)
+        for i in range(a, b):
+            wy[f, i] = uy[f, i]
+
+
+@njit(cache=True)
+def full_rows(rho: np.ndarray, full: float, lohi: np.ndarray) -> bool:
+    """Store per row the column range ``[lo, hi)`` of cells with ``rho >= full``.
 
     :return: True if there is any such cell.
     """
     ny, nx = rho.shape
-    iy0, iy1, ix0, ix1 = ny, -1, nx, -1
+    found = False
     for j in range(ny):
+        row = rho[j]
+        count = 0
         for i in range(nx):
-            if rho[j, i] >= rho_max:
-                if j < iy0:
-                    iy0 = j
-                iy1 = j
-                if i < ix0:
-                    ix0 = i
-                if i > ix1:
-                    ix1 = i
-    if iy1 < 0:
-        box[0] = 0
-        box[1] = 0
-        box[2] = 0
-        box[3] = 0
-        return False
-    box[0] = iy0
-    box[1] = iy1 + 1
-    box[2] = ix0
-    box[3] = ix1 + 1
-    return True
-
-
-@njit(cache=True)
-def restore_box(wx: np.ndarray, wy: np.ndarray, ux: np.ndarray, uy: np.ndarray,
-                box: np.ndarray) -> None:
-    """Reset the total face velocities of the face box ``box`` to the belt field."""
-    iy0, iy1, ix0, ix1 = box[0], box[1], box[2], box[3]
-    for j in range(iy0, iy1):
-        for f in range(ix0, ix1 + 1):
-            wx[j, f] = ux[j, f]
-    for f in range(iy0, iy1 + 1):
-        for i in range(ix0, ix1):
-            wy[f, i] = uy[f, i]
+            count += row[i] >= full       # branch-free: vectorises
+        if count == 0:
+            lohi[j, 0] = 0
+            lohi[j, 1] = 0
+            continue
+        found = True
+        for i in range(nx):
+            if row[i] >= full:
+                lohi[j, 0] = i
+                break
+        for i in range(nx - 1, -1, -1):
+            if row[i] >= full:
+                lohi[j, 1] = i + 1
+                break
+    return found
 
 
 @njit(cache=True)
 def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: float,
                        h: float, w: np.ndarray, dx: np.ndarray, dy: np.ndarray,
                        gx: np.ndarray, gy: np.ndarray, ux: np.ndarray, uy: np.ndarray,
-                       wx: np.ndarray, wy: np.ndarray, box: np.ndarray,
-                       face_box: np.ndarray) -> bool:
+                       wx: np.ndarray, wy: np.ndarray, lohi: np.ndarray,
+                       rng: np.ndarray) -> bool:
     """Set the total face velocities ``wx = ux + Ix``, ``wy = uy + Iy`` [m/s] from ``rho``.
 
     ``grad(eta * rho)`` is computed as ``eta * grad(rho)``: the face differences of ``rho``
     (zero across faces touching a solid cell: no gradient through a wall) mollified with the
-    separable taps ``w`` along both axes. Only the faces of the grown box of full cells are
-    touched; the box written by the previous call (``face_box``) is first reset to the belt
-    field ``ux``, ``uy``.
+    separable taps ``w`` along both axes. Work is confined, row by row, to the full cells grown
+    by ``K = 2 r + 3`` cells (Chebyshev), enough for every value the operator faces use to be
+    computed from fresh inputs; the region written by the previous call (``rng``) is first
+    reset to the belt field ``ux``, ``uy``.
 
     :param w: 1D mollifier taps. :param dx: work ``(ny, nx + 1)``, :param dy: work
         ``(ny + 1, nx)``: face differences [parts/m^3]; :param gx: work ``(ny, nx + 1)``,
         :param gy: work ``(ny + 1, nx)``: mollified gradients (x pass, then both).
-    :param box: work int64 ``(4,)``. :param face_box: int64 ``(4,)``, see above.
+    :param lohi: work int64 ``(ny, 2)``: per-row range of full cells.
+    :param rng: int64 ``(ny, 2)``: per-row work range, kept between calls (see above).
     :return: True if the operator is active anywhere.
     """
     ny, nx = rho.shape
-    restore_box(wx, wy, ux, uy, face_box)
+    restore_rows(wx, wy, ux, uy, rng)
     full = rho_max * (1.0 - H_TOLERANCE)
-    if not full_box(rho, solid, full, box):
-        face_box[0] = 0
-        face_box[1] = 0
-        face_box[2] = 0
-        face_box[3] = 0
+    if not full_rows(rho, full, lohi):
+        for j in range(ny):
+            rng[j, 0] = 0
+            rng[j, 1] = 0
         return False
     r = (w.size - 1) // 2
+    grow = 2 * r + 3
+    for j in range(ny):
+        a = nx
+        b = 0
+        for jj in range(max(0, j - grow), min(ny, j + grow + 1)):
+            if lohi[jj, 1] > lohi[jj, 0]:
+                a = min(a, lohi[jj, 0] - grow)
+                b = max(b, lohi[jj, 1] + grow)
+        if b > a:
+            rng[j, 0] = max(a, 0)
+            rng[j, 1] = min(b, nx)
+        else:
+            rng[j, 0] = 0
+            rng[j, 1] = 0
     inv_h = 1.0 / h
-    # Operator faces: around the cells of the full box grown by one.
-    fy0, fy1 = max(0, box[0] - 1), min(ny, box[1] + 1)
-    fx0, fx1 = max(0, box[2] - 1), min(nx, box[3] + 1)
-    # Work region: r + 2 cells further, so the mollified gradients used are exact.
-    r0, r1 = max(0, box[0] - r - 3), min(ny, box[1] + r + 3)
-    c0, c1 = max(0, box[2] - r - 3), min(nx, box[3] + r + 3)
     # Raw face differences (zero across solid faces and the domain edge).
-    for j in range(r0, r1):
-        for f in range(c0, c1 + 1):
+    for j in range(ny):
+        a = rng[j, 0]
+        b = rng[j, 1]
+        if b <= a:
+            continue
+        for f in range(a, b + 1):
             d = 0.0
             if 0 < f < nx and solid[j, f - 1] == 0 and solid[j, f] == 0:
                 d = (rho[j, f] - rho[j, f - 1]) * inv_h
             dx[j, f] = d
-    for f in range(r0, r1 + 1):
-        for i in range(c0, c1):
+    for f in range(ny + 1):
+        a, b = _face_row_range(rng, f, ny)
+        for i in range(a, b):
             d = 0.0
             if 0 < f < ny and solid[f - 1, i] == 0 and solid[f, i] == 0:
                 d = (rho[f, i] - rho[f - 1, i]) * inv_h
             dy[f, i] = d
     # Separable mollification: along x into gx / gy, then along y back into dx / dy.
-    for j in range(r0, r1):
-        for f in range(c0, c1 + 1):
+    for j in range(ny):
+        a = rng[j, 0]
+        b = rng[j, 1]
+        if b <= a:
+            continue
+        for f in range(a, b + 1):
             s = 0.0
             for k in range(-r, r + 1):
                 ff = f + k
-                if c0 <= ff <= c1:
+                if a <= ff <= b:
                     s += w[k + r] * dx[j, ff]
             gx[j, f] = s
-    for f in range(r0, r1 + 1):
-        for i in range(c0, c1):
+    for f in range(ny + 1):
+        a, b = _face_row_range(rng, f, ny)
+        for i in range(a, b):
             s = 0.0
             for k in range(-r, r + 1):
                 ii = i + k
-                if c0 <= ii < c1:
+                if a <= ii < b:
                     s += w[k + r] * dy[f, ii]
             gy[f, i] = s
-    for j in range(r0, r1):
-        for f in range(c0, c1 + 1):
+    for j in range(ny):
+        a = rng[j, 0]
+        b = rng[j, 1]
+        if b <= a:
+            continue
+        for f in range(a, b + 1):
             s = 0.0
             for k in range(-r, r + 1):
                 jj = j + k
-                if r0 <= jj < r1:
+                if 0 <= jj < ny:
                     s += w[k + r] * gx[jj, f]
             dx[j, f] = s
-    for f in range(r0, r1 + 1):
-        for i in range(c0, c1):
+    for f in range(ny + 1):
+        a, b = _face_row_range(rng, f, ny)
+        for i in range(a, b):
             s = 0.0
             for k in range(-r, r + 1):
                 ff = f + k
-                if r0 <= ff <= r1:
+                if 0 <= ff <= ny:
                     s += w[k + r] * gy[ff, i]
             dy[f, i] = s
-    # Operator on the faces of the box: dx, dy now hold the mollified gradients.
-    for j in range(fy0, fy1):
-        for f in range(max(fx0, 1), min(fx1, nx - 1) + 1):
+    # Operator on the faces next to full cells: dx, dy now hold the mollified gradients.
+    for j in range(ny):
+        lo = lohi[j, 0]
+        hi = lohi[j, 1]
+        if hi <= lo:
+            continue
+        for f in range(max(lo, 1), min(hi, nx - 1) + 1):
             if solid[j, f - 1] != 0 or solid[j, f] != 0:
                 continue
             if rho[j, f - 1] < full and rho[j, f] < full:
@@ -211,8 +239,9 @@ def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: 
                 continue  # push only down the local density difference (monotone)
             ty = 0.25 * (dy[j, f - 1] + dy[j, f] + dy[j + 1, f - 1] + dy[j + 1, f])
             wx[j, f] = ux[j, f] - eps * tx / math.sqrt(1.0 + tx * tx + ty * ty)
-    for f in range(max(fy0, 1), min(fy1, ny - 1) + 1):
-        for i in range(fx0, fx1):
+    for f in range(1, ny):
+        a, b = _face_row_range(lohi, f, ny)
+        for i in range(a, b):
             if solid[f - 1, i] != 0 or solid[f, i] != 0:
                 continue
             if rho[f - 1, i] < full and rho[f, i] < full:
@@ -222,8 +251,4 @@ def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: 
                 continue
             tx = 0.25 * (dx[f - 1, i] + dx[f - 1, i + 1] + dx[f, i] + dx[f, i + 1])
             wy[f, i] = uy[f, i] - eps * ty / math.sqrt(1.0 + tx * tx + ty * ty)
-    face_box[0] = fy0
-    face_box[1] = fy1
-    face_box[2] = fx0
-    face_box[3] = fx1
     return True

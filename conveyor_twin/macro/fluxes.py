@@ -55,8 +55,19 @@ def limited_slope(dl: float, dr: float, limiter: int) -> float:
 
 @njit(cache=True)
 def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float) -> None:
-    """Receiver cut of the positive faces of one line (faces ``0..n``, cells ``0..n-1``)."""
-    for f in range(n - 1, -1, -1):
+    """Receiver cut of one line (faces ``0..n``, cells ``0..n-1``).
+
+    A cut only propagates upstream (through the outflow credit), so the positive-face pass
+    starts at the last overflowing cell and the negative-face pass at the first one.
+    """
+    first = n
+    last = -1
+    for i in range(n):
+        if rho[i] + max(a[i], 0.0) - min(a[i + 1], 0.0) > rho_max:
+            if first == n:
+                first = i
+            last = i
+    for f in range(last, -1, -1):
         af = a[f]
         if af <= 0.0:
             continue
@@ -76,7 +87,7 @@ def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float) -> Non
                 cap = 0.0
             if af > cap:
                 a[f] = cap
-    for f in range(1, n + 1):
+    for f in range(first + 1, n + 1):
         af = a[f]
         if af >= 0.0:
             continue
@@ -302,15 +313,22 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
             count += _pair_excess(a[j], a[j + 1], rho[j], nx, rho_max)
         if count > 0:
             # Columns without an overflowing cell are left unchanged by the cut: skip them.
+            # and the cut propagates only upstream of the overflowing rows.
             i0 = nx
             i1 = 0
+            j0 = ny
+            j1 = -1
             for j in range(ny):
+                if _pair_excess(a[j], a[j + 1], rho[j], nx, rho_max) == 0:
+                    continue
+                j0 = min(j0, j)
+                j1 = j
                 for i in range(nx):
                     v = rho[j, i] + max(a[j, i], 0.0) - min(a[j + 1, i], 0.0)
                     if v > rho_max:
                         i0 = min(i0, i)
                         i1 = max(i1, i + 1)
-            _cap_grid_y(a, rho, rho_max, i0, i1)
+            _cap_grid_y(a, rho, rho_max, i0, i1, j0, j1)
     for j in range(ny):
         for i in range(nx):
             rho[j, i] += a[j, i] - a[j + 1, i]
@@ -328,10 +346,14 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
 
 
 @njit(cache=True)
-def _cap_grid_y(a: np.ndarray, rho: np.ndarray, rho_max: float, i0: int, i1: int) -> None:
-    """Receiver cut of a y sweep (as :func:`_cap_line_pos`) on the columns ``i0..i1-1``."""
+def _cap_grid_y(a: np.ndarray, rho: np.ndarray, rho_max: float, i0: int, i1: int, j0: int,
+                j1: int) -> None:
+    """Receiver cut of a y sweep (as :func:`_cap_line_pos`) on the columns ``i0..i1-1``.
+
+    ``j0``, ``j1``: first and last row with an overflowing cell.
+    """
     ny = rho.shape[0]
-    for f in range(ny - 1, -1, -1):
+    for f in range(j1, -1, -1):
         for i in range(i0, i1):
             af = a[f, i]
             if af <= 0.0:
@@ -352,7 +374,7 @@ def _cap_grid_y(a: np.ndarray, rho: np.ndarray, rho_max: float, i0: int, i1: int
                     cap = 0.0
                 if af > cap:
                     a[f, i] = cap
-    for f in range(1, ny + 1):
+    for f in range(j0 + 1, ny + 1):
         for i in range(i0, i1):
             af = a[f, i]
             if af >= 0.0:

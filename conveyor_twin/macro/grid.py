@@ -69,7 +69,7 @@ class Grid:
         return cls(float(x0), float(y0), float(h), nx, ny)
 
     def centres(self) -> Tuple[np.ndarray, np.ndarray]:
-        """Return cell-centre coordinate arrays ``(X, Y)``, each ``(ny, nx)`` [m]."""
+        """Return cell-centre coordinate arrays ``(xc, yc)``, each ``(ny, nx)`` [m]."""
         xs = self.origin_x + (np.arange(self.nx) + 0.5) * self.h
         ys = self.origin_y + (np.arange(self.ny) + 0.5) * self.h
         return np.meshgrid(xs, ys)
@@ -245,11 +245,11 @@ def actuator_wall_velocity(actuator: Actuator, position: float, rate: float, px:
 
 def belt_index_of_cells(grid: Grid, belts: Sequence[Belt]) -> np.ndarray:
     """Return ``(ny, nx)`` int32: index of the belt under each cell centre, -1 for none."""
-    X, Y = grid.centres()
+    xc, yc = grid.centres()
     out = np.full((grid.ny, grid.nx), -1, dtype=np.int32)
     for k, belt in enumerate(belts):
         dx, dy = belt.direction
-        rx, ry = X - belt.start[0], Y - belt.start[1]
+        rx, ry = xc - belt.start[0], yc - belt.start[1]
         along = rx * dx + ry * dy
         across = -rx * dy + ry * dx
         inside = (along >= 0.0) & (along <= belt.length) & (np.abs(across) <= 0.5 * belt.width)
@@ -283,12 +283,12 @@ def rasterise_static(grid: Grid, obstacles: Sequence[Obstacle], band_cells: int 
     :return: ``(solid, normal)``: ``(ny, nx)`` uint8 solid mask and ``(ny, nx, 2)`` float64
         outward normals on the sliding band (zero elsewhere).
     """
-    X, Y = grid.centres()
+    xc, yc = grid.centres()
     solid = np.zeros((grid.ny, grid.nx), dtype=bool)
     shapes = []
     tol = 1e-9 * grid.h
     for obstacle in obstacles:
-        d, nx_, ny_ = obstacle_shape(obstacle, X, Y, grid.h)
+        d, nx_, ny_ = obstacle_shape(obstacle, xc, yc, grid.h)
         mask = d < -tol
         solid |= mask
         shapes.append((mask, d, nx_, ny_))
@@ -313,7 +313,7 @@ def rasterise_actuators(grid: Grid, actuators: Sequence[Actuator], positions: np
         normals ``(ny, nx, 2)`` and the wall's normal speed [m/s] ``(ny, nx)`` on the sliding
         band, and the wall velocity [m/s] ``(ny, nx, 2)`` on the solid cells (for sweeping).
     """
-    X, Y = grid.centres()
+    xc, yc = grid.centres()
     ny, nx = grid.ny, grid.nx
     solid = np.zeros((ny, nx), dtype=bool)
     normal = np.zeros((ny, nx, 2))
@@ -325,12 +325,12 @@ def rasterise_actuators(grid: Grid, actuators: Sequence[Actuator], positions: np
         if not actuator_engaged(actuator, float(position)):
             continue
         poly = actuator_polygon(actuator, float(position))
-        d, nx_, ny_ = _convex_polygon_shape(X, Y, poly, grid.h)
+        d, nx_, ny_ = _convex_polygon_shape(xc, yc, poly, grid.h)
         mask = d < -tol
         if not mask.any():
             continue
         solid |= mask
-        vx, vy = actuator_wall_velocity(actuator, float(position), float(rate), X, Y)
+        vx, vy = actuator_wall_velocity(actuator, float(position), float(rate), xc, yc)
         wall_velocity[mask, 0] = vx[mask]
         wall_velocity[mask, 1] = vy[mask]
         band = _band(mask, SLIDE_BAND_CELLS) & ~mask & (static_solid == 0)

@@ -55,8 +55,8 @@ def advance(nsteps: int, nsub: int, dts: float, parity: np.ndarray, rho: np.ndar
             solid: np.ndarray, h: float, rho_max: float, capped: bool, limited: bool,
             limiter: int, in_rate: np.ndarray, in_acc: np.ndarray, out_acc: np.ndarray,
             ax: np.ndarray, ay: np.ndarray, slope: np.ndarray, eps: float, w: np.ndarray,
-            dx: np.ndarray, dy: np.ndarray, gx: np.ndarray, gy: np.ndarray, box: np.ndarray,
-            face_box: np.ndarray) -> None:
+            dx: np.ndarray, dy: np.ndarray, gx: np.ndarray, gy: np.ndarray, lohi: np.ndarray,
+            rng: np.ndarray) -> None:
     """Advance ``nsteps`` twin steps of ``nsub`` substeps of ``dts`` [s] each, in place.
 
     ``parity[0]`` counts substeps (the sweep order alternates with it). ``wx``, ``wy`` are the
@@ -68,7 +68,7 @@ def advance(nsteps: int, nsub: int, dts: float, parity: np.ndarray, rho: np.ndar
         for _q in range(nsub):
             if use_op:
                 _col.collision_operator(rho, solid, rho_max, eps, h, w, dx, dy, gx, gy, ux, uy,
-                                        wx, wy, box, face_box)
+                                        wx, wy, lohi, rng)
             if parity[0] % 2 == 0:
                 _fx.sweep_x(rho, wx, solid, dts, h, rho_max, capped, limited, limiter,
                             in_rate, in_acc, out_acc, ax, slope)
@@ -149,8 +149,8 @@ class MacroSim:
         self._dy = np.zeros((ny + 1, nx))
         self._gx = np.zeros((ny, nx + 1))
         self._gy = np.zeros((ny + 1, nx))
-        self._box = np.zeros(4, dtype=np.int64)
-        self._face_box = np.zeros(4, dtype=np.int64)
+        self._lohi = np.zeros((ny, 2), dtype=np.int64)
+        self._rng = np.zeros((ny, 2), dtype=np.int64)
         self._parity = np.zeros(1, dtype=np.int64)
         self._w = _col.mollifier_weights(g.h, cell.macro.mollifier_width)
         nb = g.n_boundary
@@ -264,7 +264,10 @@ class MacroSim:
         self._rebuild()
 
     def set_inflow(self, rates: Sequence[float]) -> None:
-        """Set the prescribed inflow per boundary face [parts/s] (``grid.boundary_faces`` order)."""
+        """Set the prescribed inflow per boundary face [parts/s].
+
+        The order is that of :meth:`conveyor_twin.macro.grid.Grid.boundary_faces`.
+        """
         rates = np.asarray(rates, dtype=np.float64)
         if rates.shape != self._in_rate.shape or np.any(rates < 0.0):
             msg = f'expected {self._in_rate.size} non-negative inflow rates, got {rates.shape}'
@@ -282,7 +285,7 @@ class MacroSim:
                 self._solid, self.grid.h, self.rho_max, self.capacity_guard,
                 self.scheme == 'limited', self.limiter, self._in_rate, self.inflow,
                 self.outflow, self._ax, self._ay, self._slope, self.epsilon, self._w,
-                self._dx, self._dy, self._gx, self._gy, self._box, self._face_box)
+                self._dx, self._dy, self._gx, self._gy, self._lohi, self._rng)
         self.parts_in += float(self.inflow.sum())
         self.parts_out += float(self.outflow.sum())
         self.outflow_total += self.outflow
@@ -386,7 +389,7 @@ class MacroSim:
                                           self._wall_a, self._vc, self._ux, self._uy)
         np.copyto(self._wx, self._ux)
         np.copyto(self._wy, self._uy)
-        self._face_box.fill(0)
+        self._rng.fill(0)
         speed = self._smax + 2.0 * self.epsilon
         self.substeps = max(1, int(math.ceil(self.dt * speed / (self.grid.h * self.cfl)
                                              - 1e-9)))

@@ -7,7 +7,6 @@ import pytest
 
 from conveyor_twin.macro import MacroSim
 from conveyor_twin.macro.fluxes import LIMITER_MC, LIMITER_MINMOD
-
 from .cells import belt, make_cell
 
 SIGMA = 0.05          # m, Gaussian width

@@ -6,7 +6,6 @@ import pytest
 from conveyor_twin.cell.model import Actuator, Obstacle
 from conveyor_twin.macro import MacroSim
 from conveyor_twin.macro.reference import ReferenceSim
-
 from .cells import belt, make_cell, RHO_MAX, wall
 
 COMBOS = [(v, s) for v in ('capped', 'goettlich') for s in ('upwind', 'limited')]
@@ -17,16 +16,16 @@ def _box_cell(variant, scheme):
     walls = [wall('s', (0.0, 0.005), (0.4, 0.005)), wall('n', (0.0, 0.195), (0.4, 0.195)),
              wall('w', (0.005, 0.0), (0.005, 0.2)), wall('e', (0.395, 0.0), (0.395, 0.2)),
              Obstacle('peg', 'peg', ((0.25, 0.1),), radius=0.02)]
-    return make_cell(region=(0.0, 0.0, 0.4, 0.2), belts=[belt((-0.1, -0.05), (0.5, 0.25), 1.0,
-                                                             0.5)],
+    return make_cell(region=(0.0, 0.0, 0.4, 0.2),
+                     belts=[belt((-0.1, -0.05), (0.5, 0.25), 1.0, 0.5)],
                      obstacles=walls, variant=variant, scheme=scheme)
 
 
 @pytest.mark.parametrize('variant,scheme', COMBOS)
 def test_mass_conserved_closed_domain_1e5_steps(variant, scheme):
     sim = MacroSim(_box_cell(variant, scheme))
-    X, Y = sim.grid.centres()
-    sim.density[:] = 0.6 * RHO_MAX * np.exp(-((X - 0.12) ** 2 + (Y - 0.1) ** 2) / 0.003)
+    xs, ys = sim.grid.centres()
+    sim.density[:] = 0.6 * RHO_MAX * np.exp(-((xs - 0.12) ** 2 + (ys - 0.1) ** 2) / 0.003)
     sim.density[sim.solid != 0] = 0.0
     initial = sim.total_parts()
     assert initial > 50.0
@@ -46,8 +45,8 @@ def _open_cell(variant, scheme, **kw):
     """A 1 m strip with a closed stopper at x = 0.8 (2 solid columns) and a deflecting peg."""
     stopper = Actuator('stop', 'stopper', (0.8, 0.0), (0.0, 1.0), 0.12, 0.01, (0.0, 0.008),
                        0.1, 0.008, engage_height=0.004)
-    return make_cell(region=(0.0, -0.05, 1.0, 0.05), belts=[belt((0.0, 0.0), (1.0, 0.0), 0.1,
-                                                                0.5)],
+    return make_cell(region=(0.0, -0.05, 1.0, 0.05),
+                     belts=[belt((0.0, 0.0), (1.0, 0.0), 0.1, 0.5)],
                      obstacles=[Obstacle('peg', 'peg', ((0.4, 0.0),), radius=0.015)],
                      actuators=[stopper], variant=variant, scheme=scheme, **kw)
 
@@ -129,12 +128,12 @@ def test_cfl_one_translates_exactly(scheme, direction):
 def _reference_scene(variant, scheme, guard):
     cell = _open_cell(variant, scheme, mollifier_width=0.04)
     sim = MacroSim(cell, guard=guard)
-    X, Y = sim.grid.centres()
+    xs, ys = sim.grid.centres()
     rates = np.zeros(sim.grid.n_boundary)
     rates[:sim.ny] = 40.0
     rates[2 * sim.ny:2 * sim.ny + 30] = 5.0   # some inflow from below as well
     sim.set_inflow(rates)
-    sim.density[:] = 0.3 * RHO_MAX * (1.0 + np.sin(40.0 * X) * np.cos(60.0 * Y))
+    sim.density[:] = 0.3 * RHO_MAX * (1.0 + np.sin(40.0 * xs) * np.cos(60.0 * ys))
     sim.density[sim.solid != 0] = 0.0
     sim.step(1700)                                # queue at the stopper and behind the peg
     return sim

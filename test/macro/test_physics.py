@@ -5,7 +5,6 @@ import pytest
 
 from conveyor_twin.cell.model import Actuator, Obstacle
 from conveyor_twin.macro import MacroSim
-
 from .cells import belt, make_cell, RHO_MAX
 
 U = 0.5          # m/s belt speed
@@ -19,8 +18,8 @@ def _stopper(position=0.008):
 
 
 def _strip(variant='capped', scheme='upwind', **kw):
-    cell = make_cell(region=(0.0, -0.05, 1.0, 0.05), belts=[belt((0.0, 0.0), (1.0, 0.0), WIDTH,
-                                                                U)],
+    cell = make_cell(region=(0.0, -0.05, 1.0, 0.05),
+                     belts=[belt((0.0, 0.0), (1.0, 0.0), WIDTH, U)],
                      actuators=[_stopper()], variant=variant, scheme=scheme, **kw)
     return MacroSim(cell)
 
@@ -84,12 +83,12 @@ def test_belt_reversal_moves_material_back_and_out_on_the_other_side():
     cell = make_cell(region=(0.0, -0.05, 1.0, 0.05),
                      belts=[belt((0.0, 0.0), (1.0, 0.0), WIDTH, U)])
     sim = MacroSim(cell)
-    X, _ = sim.grid.centres()
-    sim.density[:] = 2000.0 * np.exp(-((X - 0.5) / 0.05) ** 2)
+    xs, _ = sim.grid.centres()
+    sim.density[:] = 2000.0 * np.exp(-((xs - 0.5) / 0.05) ** 2)
     total = sim.total_parts()
 
     def centroid():
-        return float((sim.density * X).sum() / sim.density.sum())
+        return float((sim.density * xs).sum() / sim.density.sum())
 
     c0 = centroid()
     sim.step(300)                                     # 0.15 m downstream
@@ -133,12 +132,12 @@ def test_deflector_redirects_to_the_gap_and_passes_the_inflow(variant):
 def test_pusher_sweeps_material_off_the_belt_edge():
     pusher = Actuator('push', 'pusher', (0.3, 0.27), (0.0, -1.0), 0.02, 0.15, (0.0, 0.6), 0.8,
                       0.0)
-    cell = make_cell(region=(0.0, -0.25, 0.6, 0.25), belts=[belt((0.0, 0.0), (0.6, 0.0), 0.5,
-                                                                0.0)],
+    cell = make_cell(region=(0.0, -0.25, 0.6, 0.25),
+                     belts=[belt((0.0, 0.0), (0.6, 0.0), 0.5, 0.0)],
                      actuators=[pusher])
     sim = MacroSim(cell)
-    X, _ = sim.grid.centres()
-    sim.density[:] = np.where((X > 0.15) & (X < 0.45), 0.5 * RHO_MAX, 0.0)
+    xs, _ = sim.grid.centres()
+    sim.density[:] = np.where((xs > 0.15) & (xs < 0.45), 0.5 * RHO_MAX, 0.0)
     total = sim.total_parts()
     swept = sim.region_parts((0.235, -0.25, 0.365, 0.25))      # columns fully under the paddle
     position = 0.0
