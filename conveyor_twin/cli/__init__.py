@@ -9,6 +9,11 @@ VERBS = {
     'run': ('conveyor_twin.cli.run', 'run the twin on a cell (default: the embedded cell)'),
     'validate': ('conveyor_twin.cli.validate', 'check a cell file and summarise it'),
     'bench': ('conveyor_twin.cli.bench', 'run a benchmark: micro, macro, twin, scale'),
+    'record': ('conveyor_twin.ros.record_node', "record a live twin's topics to MCAP"),
+    'replay': ('conveyor_twin.ros.replay', 'republish a recording with its original timing'),
+    'info': ('conveyor_twin.cli.info', 'summarize a recording (topics, counts, rates)'),
+    'recover': ('conveyor_twin.cli.recover', 'rebuild a killed or damaged recording'),
+    'plot': ('conveyor_twin.cli.plot', 'plot trajectories, density, barriers, belts'),
 }
 
 

@@ -1,0 +1,142 @@
+"""The contract's topics as a recorder or a replayer sees them: name, type, QoS, time source.
+
+No rclpy here: the table is plain data (types by full name, QoS as
+:class:`conveyor_twin.record.qos.OfferedQos`), so the recorder node, the replayer and the
+offline tools (info, plot) share it. Names are relative (a namespace moves them) except
+``/clock``, which is absolute as simulators publish it.
+
+Log time of a recorded message (:func:`stamp_ns`): the simulation time it carries, read straight
+from the CDR bytes: ``header.stamp`` is the first 8 bytes of the payload of every stamped type
+(``int32 sec``, ``uint32 nanosec``), and the payload of ``rosgraph_msgs/Clock`` is the time
+itself. Commands carry no time.
+"""
+
+import struct
+from typing import Dict, Iterable, List, NamedTuple, Optional
+
+from . import qos as qos_mod
+from .qos import OfferedQos
+
+#: ``header.stamp`` (or a Clock's time) at the payload start: the stamp is the first field.
+HEADER = 'header'
+CLOCK = 'clock'
+NONE = ''
+
+_STAMP_LE = struct.Struct('<iI')
+_STAMP_BE = struct.Struct('>iI')
+NS_PER_S = 1_000_000_000
+
+
+class TopicSpec(NamedTuple):
+    """One topic of the contract.
+
+    :param name: relative name (absolute for ``/clock``).
+    :param type_name: full type name, ``pkg/msg/Type``.
+    :param qos: the QoS the twin offers on it (what a subscriber should request).
+    :param stamp: where its time is: :data:`HEADER`, :data:`CLOCK` or :data:`NONE`.
+    :param default: recorded by default (``markers`` is opt-in: viewer data).
+    :param command: an input of the twin (a replay publishing it drives a live twin).
+    """
+
+    name: str
+    type_name: str
+    qos: OfferedQos
+    stamp: str
+    default: bool = True
+    command: bool = False
+
+
+_MSGS = 'conveyor_twin_msgs/msg/'
+
+#: The contract topics by relative name (architecture.md, ROS interface).
+CONTRACT_TOPICS: Dict[str, TopicSpec] = {spec.name: spec for spec in (
+    TopicSpec('parts', _MSGS + 'PartStates', qos_mod.STREAM_QOS, HEADER),
+    TopicSpec('density', _MSGS + 'DensityGrid', qos_mod.STREAM_QOS, HEADER),
+    TopicSpec('light_barriers', _MSGS + 'LightBarrierStates', qos_mod.STREAM_QOS, HEADER),
+    TopicSpec('light_barrier_edges', _MSGS + 'LightBarrierEdge', qos_mod.EDGE_QOS, HEADER),
+    TopicSpec('belt_states', _MSGS + 'BeltStates', qos_mod.STREAM_QOS, HEADER),
+    TopicSpec('actuator_states', _MSGS + 'ActuatorStates', qos_mod.STREAM_QOS, HEADER),
+    TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', qos_mod.CLOCK_QOS, CLOCK),
+    TopicSpec('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', qos_mod.SLOW_QOS, HEADER),
+    TopicSpec('markers', 'visualization_msgs/msg/MarkerArray', qos_mod.SLOW_QOS, NONE,
+              default=False),
+    TopicSpec('belt_command', _MSGS + 'BeltCommand', qos_mod.COMMAND_QOS, NONE,
+              command=True),
+    TopicSpec('actuator_command', _MSGS + 'ActuatorCommand', qos_mod.COMMAND_QOS, NONE,
+              command=True),
+)}
+
+#: Stamp location by type, for topics known only by their type (recorded or discovered).
+STAMP_BY_TYPE: Dict[str, str] = {spec.type_name: spec.stamp
+                                 for spec in CONTRACT_TOPICS.values()}
+
+
+def resolve(name: str, namespace: str = '') -> str:
+    """Return the absolute name of a topic in a namespace.
+
+    :param name: relative (``parts``) or absolute (``/clock``) topic name.
+    :param namespace: ROS namespace (``''``, ``/`` or ``/twin``; a missing leading slash is
+        added).
+    :return: e.g. ``/twin/parts``, ``/clock``.
+    """
+    if name.startswith('/'):
+        return name
+    ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
+    return f'{ns}/{name}'
+
+
+def relative(topic: str, namespace: str = '') -> str:
+    """Return the contract name of an absolute topic in a namespace (inverse of :func:`resolve`).
+
+    A topic outside the namespace (or ``/clock``) is returned unchanged.
+    """
+    ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
+    if topic != '/clock' and topic.startswith(ns + '/'):
+        return topic[len(ns) + 1:]
+    return topic
+
+
+def spec_of(topic: str, namespace: str = '') -> Optional[TopicSpec]:
+    """Return the contract entry of an absolute topic in a namespace (None if not contract)."""
+    return CONTRACT_TOPICS.get(relative(topic, namespace))
+
+
+def select(names: Optional[Iterable[str]] = None, *,
+           markers: bool = False) -> List[TopicSpec]:
+    """Return the contract entries to record.
+
+    :param names: relative names (``/clock`` absolute) to pick; None: every default topic.
+    :param markers: add ``markers`` to the defaults.
+    :raises KeyError: for a name that is not a contract topic (the message lists them).
+    """
+    if names is None:
+        return [s for s in CONTRACT_TOPICS.values() if s.default or (markers and
+                                                                      s.name == 'markers')]
+    chosen = []
+    for name in names:
+        spec = CONTRACT_TOPICS.get(name) or CONTRACT_TOPICS.get(name.lstrip('/'))
+        if spec is None and name.lstrip('/') == 'clock':
+            spec = CONTRACT_TOPICS['/clock']
+        if spec is None:
+            msg = f'{name!r} is not a contract topic; expected one of {", ".join(CONTRACT_TOPICS)}'
+            raise KeyError(msg)
+        if spec not in chosen:
+            chosen.append(spec)
+    return chosen
+
+
+def stamp_ns(stamp: str, data: bytes) -> Optional[int]:
+    """Return the simulation time carried by a CDR message, or None if it carries none.
+
+    :param stamp: :data:`HEADER` or :data:`CLOCK` (the time is the first field of the payload)
+        or :data:`NONE`.
+    :param data: serialized message, with its 4-byte encapsulation header.
+    :return: time [ns], or None (no stamp, too short, or an encapsulation other than CDR).
+    """
+    if not stamp or len(data) < 12:
+        return None
+    kind = data[1]
+    if data[0] != 0 or kind not in (0, 1):
+        return None
+    sec, nanosec = (_STAMP_LE if kind == 1 else _STAMP_BE).unpack_from(data, 4)
+    return sec * NS_PER_S + nanosec
