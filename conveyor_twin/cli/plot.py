@@ -7,7 +7,7 @@ Figures (each only when the recording has the topic):
 - ``density.png``: the macro density (``imshow`` of each zone's grid in the cell frame) at the
   times of ``--times``, one panel per time;
 - ``light_barriers.png``: blocked (1) / free (0) against time per barrier, edges marked
-  (▲ blocked, ▼ freed, at their interpolated time);
+  (▼ above: became blocked, ▲ below: became free, at their interpolated time);
 - ``belt_speeds.png``: commanded (dashed) and actual speed against time per belt;
 - ``actuators.png``: commanded and actual position against time per actuator.
 

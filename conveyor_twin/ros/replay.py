@@ -16,6 +16,11 @@ effective time, to drive a live twin); the recorded command topics of a standalo
 (``belt_command``, ``actuator_command``) are republished like any topic, so drop them with
 ``--topics`` when a live twin listens.
 
+To catch the first messages, start the subscribers first and use ``--wait-for-subscribers``
+with a ``--delay``: a publisher sees its subscribers match a moment before they see it, and a
+message sent in between is lost even on a reliable topic (observed with Fast DDS 3.2, volatile
+durability; 0.5 s was ample here).
+
 With ``--loop``, the recording starts over after its last message plus one recorded spacing;
 ``/clock`` then jumps back, as with ``ros2 bag play --loop``.
 """
@@ -398,7 +403,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help='before starting, wait up to TIMEOUT [s] until every topic has a '
                    'subscriber')
     p.add_argument('--delay', type=float, default=0.0,
-                   help='wait this long after creating the publishers (discovery) [s]')
+                   help='wait this long before the first message (after matching) [s]')
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
     return p
 
