@@ -1,28 +1,38 @@
 """``conveyor-twin bench macro``: time per 1 ms macro step, every variant and scheme.
 
-Scene: a belt at 0.5 m/s carrying 10 mm spacers (rho_max 11547 /m^2) across the grid, a 45 degree
-deflector across 70 % of the width at mid-length, fed at the inlet with 0.3 rho_max; the grid is
-pre-run until a queue has formed in front of the deflector (so the cap and the collision
-operator are really at work), then each step is timed. Baselines in the same run: a plain NumPy
-split upwind step (:func:`conveyor_twin.macro.reference.upwind_step`, no cap, no bookkeeping)
-and PyClaw's 2D advection (classic solver, dimensional splitting, first order) when clawpack is
-installed.
+Scene: a belt at 0.5 m/s carrying 10 mm spacers (rho_max 11547 /m^2) across the grid, a
+45 degree deflector across 70 % of the width at mid-length, fed at the inlet with
+0.3 rho_max; the grid is pre-run until a queue has formed in front of the deflector (so the
+cap and the collision operator are really at work), then each step is timed. Baselines in
+the same run: a plain NumPy split upwind step
+(:func:`conveyor_twin.macro.reference.upwind_step`, no cap, no bookkeeping) and PyClaw's 2D
+advection (classic solver, dimensional splitting, first order) when clawpack is installed.
 
-Measured here (2 shared cores, AMD EPYC, numba 0.68, median per 1 ms step, 1 substep):
+Rows ``*_free``: the same belt without the deflector (free flow, nothing reaches rho_max):
+plain capped advection, and the Göttlich variant with its operator idle.
 
-==================  ===========  ==============
-grid 400 x 100      median [ms]  vs NumPy upwind
-==================  ===========  ==============
-capped upwind       0.068        6.6x faster
-capped limited      0.24         1.9x
-goettlich upwind    0.091        4.9x
-goettlich limited   0.28         1.6x
-numpy upwind        0.45         1
-==================  ===========  ==============
+Measured here (2 cores shared with other engineers, numba 0.68, NumPy 2.4; medians per 1 ms
+step, one substep each; the machine's speed varied by 1.7x during the session, measured by a
+fixed 4-pass numba loop at 66-116 us, so figures are given as the range of three runs;
+``--steps`` 1000-2000, the jam grows while it is timed: 2600-2900 cells at rho_max, 6.5-7 %
+of the grid):
 
-Grid 2000 x 500: capped upwind 2.6 ms, goettlich upwind 3.2 ms, numpy upwind 19 ms (see
-``--json`` output for the full set). PyClaw could not be installed on this machine (clawpack
-builds Fortran with meson and no gfortran is present), so its ratio is reported as skipped.
+======================  =============  =============
+case                    400 x 100      2000 x 500
+======================  =============  =============
+capped upwind, jam      0.21-0.33 ms   6.4-11.7 ms
+capped limited, jam     0.37-0.62 ms   13.8-20.3 ms
+goettlich upwind, jam   0.34-0.54 ms   10.5-24.7 ms
+goettlich limited, jam  0.80-0.88 ms   16.6-21.1 ms
+capped upwind, free     0.10-0.19 ms   3.9 ms
+goettlich upwind, free  0.11-0.20 ms   5.1 ms
+NumPy upwind            0.36-0.52 ms   18.8-34.5 ms
+======================  =============  =============
+
+Ratios NumPy / numba in the same run: free capped upwind 2.4-3.5x, capped upwind in the jam
+1.3-1.6x, Göttlich upwind in the jam 0.9-1.3x (NumPy's step has no cap, no operator and no
+bookkeeping). PyClaw could not be installed on this machine (clawpack builds its Fortran
+kernels with meson and no gfortran is present), so its ratio is reported as skipped.
 """
 
 import argparse

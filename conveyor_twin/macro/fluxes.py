@@ -54,20 +54,13 @@ def limited_slope(dl: float, dr: float, limiter: int) -> float:
 
 
 @njit(cache=True)
-def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float) -> None:
+def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float,
+                  has_negative: bool) -> None:
     """Receiver cut of one line (faces ``0..n``, cells ``0..n-1``).
 
-    A cut only propagates upstream (through the outflow credit), so the positive-face pass
-    starts at the last overflowing cell and the negative-face pass at the first one.
+    :param has_negative: False if no face amount is negative (the second pass is skipped).
     """
-    first = n
-    last = -1
-    for i in range(n):
-        if rho[i] + max(a[i], 0.0) - min(a[i + 1], 0.0) > rho_max:
-            if first == n:
-                first = i
-            last = i
-    for f in range(last, -1, -1):
+    for f in range(n - 1, -1, -1):
         af = a[f]
         if af <= 0.0:
             continue
@@ -87,7 +80,9 @@ def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float) -> Non
                 cap = 0.0
             if af > cap:
                 a[f] = cap
-    for f in range(first + 1, n + 1):
+    if not has_negative:
+        return
+    for f in range(1, n + 1):
         af = a[f]
         if af >= 0.0:
             continue
@@ -191,6 +186,7 @@ def sweep_x(rho: np.ndarray, wx: np.ndarray, solid: np.ndarray, dts: float, h: f
         wj = wx[j]
         sol = solid[j]
         # Boundary faces: upwind outflow, or the prescribed inflow.
+        negative = 0
         w = wj[0]
         if w < 0.0:
             aj[0] = w * k * r[0]
@@ -213,6 +209,7 @@ def sweep_x(rho: np.ndarray, wx: np.ndarray, solid: np.ndarray, dts: float, h: f
             for f in range(1, nx):
                 w = wj[f]
                 c = w * k
+                negative += w < 0.0
                 if w > 0.0:
                     aj[f] = c * (r[f - 1] + 0.5 * (1.0 - c) * sj[f - 1])
                 elif w < 0.0:
@@ -224,10 +221,12 @@ def sweep_x(rho: np.ndarray, wx: np.ndarray, solid: np.ndarray, dts: float, h: f
         else:
             for f in range(1, nx):
                 w = wj[f]
+                negative += w < 0.0
                 aj[f] = w * k * (r[f - 1] if w > 0.0 else r[f])
         if capped:
             if _line_excess(aj, r, nx, rho_max) > 0:
-                _cap_line_pos(aj, r, nx, rho_max)
+                negative += (aj[0] < 0.0) + (aj[nx] < 0.0)
+                _cap_line_pos(aj, r, nx, rho_max, negative > 0)
         for i in range(nx):
             r[i] += aj[i] - aj[i + 1]
         a0 = aj[0]
@@ -257,6 +256,7 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
     in_scale = dts / area
     b0 = 2 * ny          # bottom faces
     b1 = 2 * ny + nx     # top faces
+    negative = 0
     for i in range(nx):
         w = wy[0, i]
         if w < 0.0:
@@ -283,6 +283,7 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
             for i in range(nx):
                 w = wy[f, i]
                 c = w * k
+                negative += w < 0.0
                 if w > 0.0:
                     a[f, i] = c * (rho[f - 1, i] + 0.5 * (1.0 - c) * slope[f - 1, i])
                 elif w < 0.0:
@@ -306,6 +307,7 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
         for f in range(1, ny):
             for i in range(nx):
                 w = wy[f, i]
+                negative += w < 0.0
                 a[f, i] = w * k * (rho[f - 1, i] if w > 0.0 else rho[f, i])
     if capped:
         count = 0
@@ -328,7 +330,9 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
                     if v > rho_max:
                         i0 = min(i0, i)
                         i1 = max(i1, i + 1)
-            _cap_grid_y(a, rho, rho_max, i0, i1, j0, j1)
+            for i in range(nx):
+                negative += (a[0, i] < 0.0) + (a[ny, i] < 0.0)
+            _cap_grid_y(a, rho, rho_max, i0, i1, j0, j1, negative > 0)
     for j in range(ny):
         for i in range(nx):
             rho[j, i] += a[j, i] - a[j + 1, i]
@@ -347,10 +351,11 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
 
 @njit(cache=True)
 def _cap_grid_y(a: np.ndarray, rho: np.ndarray, rho_max: float, i0: int, i1: int, j0: int,
-                j1: int) -> None:
+                j1: int, has_negative: bool) -> None:
     """Receiver cut of a y sweep (as :func:`_cap_line_pos`) on the columns ``i0..i1-1``.
 
-    ``j0``, ``j1``: first and last row with an overflowing cell.
+    ``j0``, ``j1``: first and last row with an overflowing cell (the cut propagates only
+    upstream of them). ``has_negative``: False skips the negative-face pass.
     """
     ny = rho.shape[0]
     for f in range(j1, -1, -1):
@@ -374,6 +379,8 @@ def _cap_grid_y(a: np.ndarray, rho: np.ndarray, rho_max: float, i0: int, i1: int
                     cap = 0.0
                 if af > cap:
                     a[f, i] = cap
+    if not has_negative:
+        return
     for f in range(j0 + 1, ny + 1):
         for i in range(i0, i1):
             af = a[f, i]

@@ -19,6 +19,24 @@ face; elsewhere a prescribed inflow rate [parts/s] per face (:meth:`MacroSim.set
 cut by the free capacity of the receiving cell in the capped variant; what entered is in
 :attr:`MacroSim.inflow`. The coordinator keeps what was refused.
 
+Parameters (cell ``macro`` section; the values here are what the embedded cell gives):
+
+- ``rho_max``: 0 derives hexagonal packing of the first part type's footprint disc,
+  ``1 / (2 sqrt(3) R^2)`` = 11547 /m^2 for the seed's 10 mm spacers (a close-packed jam of
+  standing discs; the densest planar arrangement, 0.907 of the area covered).
+- ``epsilon`` (operator speed): it must exceed the largest belt speed, or the belt packs a
+  jam faster than the operator can spread it; the cell default 0.5 m/s equals the rig's belt
+  speed. Recommended default: the largest belt ``max_speed`` (2 m/s in the rig); the capacity
+  guard keeps the bound either way.
+- ``mollifier_width``: 0 means two cells (taps 0.23, 0.54, 0.23): the smallest kernel that
+  smooths the cell-to-cell noise of the H switch, close to the spacer diameter on a 1 cm grid;
+  wider kernels smear the push over several part diameters and cost ``(2 r + 1)`` per pass.
+- ``scheme`` ``limited`` uses the MC limiter (:data:`DEFAULT_LIMITER`): observed order 2.0 on
+  a smooth problem against 1.8 for minmod (``limiter=LIMITER_MINMOD`` selects it).
+- ``slide_band`` (:data:`DEFAULT_SLIDE_BAND`, 5 cm): depth of the sliding layer in front of
+  fixed obstacles; with one cell the jam in front of the rig's deflector passes 180 of
+  500 parts/s through the gap, with 5 cm the inflow up to ~250-430 parts/s (capped/Göttlich).
+
 Actuators: an engaged actuator is a solid region (a stopper from ``engage_height`` on, pushers
 and diverter arms always); the faces of its sliding band carry its normal speed, so a pusher
 drives the material in front of it at its own speed while the belt's tangential component stays.
