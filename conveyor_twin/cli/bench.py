@@ -8,6 +8,7 @@ from typing import List
 BENCHES = {
     'micro': 'conveyor_twin.bench.micro',
     'macro': 'conveyor_twin.bench.macro',
+    'record': 'conveyor_twin.bench.record',
 }
 
 
