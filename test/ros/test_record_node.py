@@ -1,4 +1,4 @@
-"""The standalone recorder: in-process round trip, and ``conveyor-twin record`` stopped by SIGINT."""
+"""The standalone recorder: in-process round trip; ``conveyor-twin record`` stopped by SIGINT."""
 
 import os
 import signal
