@@ -1,0 +1,133 @@
+"""``conveyor-twin run``: the twin on a cell for a bounded time, with progress and a summary.
+
+Composed (default): the micro, macro and coordinator nodes in this process, stepped in memory.
+``--split``: the three nodes as three processes coupled over ROS topics.
+"""
+
+import argparse
+import json
+import os
+import signal
+import sys
+import time
+from typing import List
+
+from conveyor_twin.cell import CellError, load_cell
+from conveyor_twin.coord.timing import TimeMode
+
+DEFAULT_DURATION = 10.0  # s of simulated time
+
+
+def ros_environment() -> None:
+    """Keep DDS traffic on this machine unless the user chose otherwise."""
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of ``run``."""
+    p = argparse.ArgumentParser(prog='conveyor-twin run', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument('--cell', default='', help='cell YAML (default: the embedded default cell)')
+    p.add_argument('--seed', type=int, default=None, help="seed (default: the cell's seed)")
+    p.add_argument('--mode', default='realtime', choices=[m.value for m in TimeMode])
+    p.add_argument('--duration', type=float, default=DEFAULT_DURATION,
+                   help='simulated seconds to run (0: until Ctrl-C) [s]')
+    p.add_argument('--split', action='store_true',
+                   help='run the three nodes as three processes coupled over ROS topics')
+    p.add_argument('--namespace', default=None, help='ROS namespace of the nodes')
+    p.add_argument('--markers-rate', type=float, default=30.0,
+                   help='MarkerArray rate on `markers` [Hz]; 0 disables')
+    p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
+    p.add_argument('--quiet', action='store_true', help='no progress line')
+    return p
+
+
+def _progress(summary: dict, wall: float) -> str:
+    total_in = summary.get('micro_entered', 0) + summary.get('macro_entered', 0.0)
+    return (f"[{wall:6.1f} s] sim {summary['sim_time_s']:7.3f} s  step {summary['steps']:>7}  "
+            f"parts micro {summary.get('micro_in_flight', 0):>5} "
+            f"macro {summary.get('macro_in_flight', 0.0):8.2f}  entered {total_in:>6g}  "
+            f"left {summary.get('micro_left', 0) + summary.get('macro_left', 0.0):>6g}  "
+            f"step mean {summary['step_time_ms']['mean']:.3f} ms "
+            f"p99 {summary['step_time_ms']['p99']:.3f} ms  "
+            f"overruns {summary['overruns']}  rtf {summary['real_time_factor']:.3f}")
+
+
+def _print_summary(summary: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(summary, sort_keys=True))
+        return
+    st = summary['step_time_ms']
+    print(f"conveyor_twin: cell {summary['cell']!r}, seed {summary['seed']}, "
+          f"{summary['mode']} mode, {summary['steps']} steps ({summary['sim_time_s']:.3f} s "
+          f'simulated)')
+    print(f"  parts  micro: entered {summary.get('micro_entered', 0)}, left "
+          f"{summary.get('micro_left', 0)}, in flight {summary.get('micro_in_flight', 0)}; "
+          f"macro: entered {summary.get('macro_entered', 0.0):g}, left "
+          f"{summary.get('macro_left', 0.0):g}, in flight "
+          f"{summary.get('macro_in_flight', 0.0):g}")
+    print(f"  step time mean {st['mean']:.4f} ms, p50 {st['p50']:.4f} ms, p99 {st['p99']:.4f} "
+          f"ms, max {st['max']:.4f} ms; overruns {summary['overruns']}; real-time factor "
+          f"{summary['real_time_factor']:.3f}; rejected commands "
+          f"{summary['rejected_commands']}")
+
+
+def run_composed(args: argparse.Namespace) -> int:
+    """Run the composed layout in this process; return the exit code."""
+    import rclpy
+    from rclpy.context import Context
+
+    from conveyor_twin.ros.compose import ComposedTwin
+
+    try:
+        cell = load_cell(args.cell)
+    except CellError as exc:
+        print(f'invalid cell: {exc}', file=sys.stderr)
+        return 1
+    seed = cell.settings.seed if args.seed is None else args.seed
+    mode = TimeMode(args.mode)
+    max_steps = round(args.duration / cell.settings.step) if args.duration > 0 else None
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    twin = ComposedTwin(cell, seed=seed, mode=mode, context=context, namespace=args.namespace,
+                        markers_rate=args.markers_rate, max_steps=max_steps)
+    interrupted = []
+    signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
+    signal.signal(signal.SIGTERM, lambda *_: interrupted.append(True))
+    start = time.monotonic()
+    twin.start()
+    tty = sys.stderr.isatty()
+    try:
+        next_progress = start + 1.0
+        while not interrupted:
+            if mode is not TimeMode.LOCKSTEP and not twin.runner.running:
+                break
+            if max_steps is not None and twin.twin.step_index >= max_steps:
+                break
+            time.sleep(0.02)
+            if not args.quiet and time.monotonic() >= next_progress:
+                next_progress += 1.0
+                line = _progress(twin.coordinator.summary(), time.monotonic() - start)
+                print(('\r' + line) if tty else line, end='' if tty else '\n',
+                      file=sys.stderr, flush=True)
+    finally:
+        twin.stop()
+        summary = twin.coordinator.summary()
+        context.try_shutdown()
+    if not args.quiet and tty:
+        print(file=sys.stderr)
+    _print_summary(summary, args.json)
+    if twin.runner.error is not None:
+        print(f'simulation stopped with an error: {twin.runner.error!r}', file=sys.stderr)
+        return 1
+    return 0
+
+
+def main(argv: List[str]) -> int:
+    """Entry point of ``conveyor-twin run``."""
+    args = build_parser().parse_args(argv)
+    ros_environment()
+    if args.split:
+        from conveyor_twin.ros.split import run_split
+        return run_split(args)
+    return run_composed(args)

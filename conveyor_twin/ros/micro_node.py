@@ -1,0 +1,79 @@
+"""``micro_simulator``: publishes every micro part, the light barriers and their edges.
+
+Composed, its stage is stepped by the coordinator in the same process; as its own process
+(``ros2 run conveyor_twin micro_simulator`` or ``python -m conveyor_twin.ros.micro_node``) it
+follows the coordinator's step inputs over the coupling topic.
+"""
+
+import sys
+from typing import List, Optional
+
+from conveyor_twin_msgs.msg import LightBarrierEdge, LightBarrierStates, PartStates
+import numpy as np
+from visualization_msgs.msg import MarkerArray
+
+from conveyor_twin.coord.stages import MicroStage
+from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.ros.markers import CellMarkers
+from conveyor_twin.ros.qos import EDGE_QOS, SLOW_QOS, STREAM_QOS
+from conveyor_twin.ros.scale_node import MICRO_ROLE, ScaleNode
+from conveyor_twin.wire import cdr
+
+
+class MicroNode(ScaleNode):
+    """Publish ``parts``, ``light_barriers``, ``light_barrier_edges`` and part ``markers``."""
+
+    def __init__(self, stage: MicroStage, **kwargs) -> None:
+        super().__init__('micro_simulator', stage, MICRO_ROLE, **kwargs)
+        cell = stage.cell
+        frame = cell.settings.frame_id
+        self._frame = frame
+        self._barrier_names = [b.name for b in cell.light_barriers]
+        self._parts = cdr.PartStatesEncoder(frame, capacity=cell.micro.capacity)
+        self._barriers = cdr.LightBarrierStatesEncoder(frame, self._barrier_names)
+        self._markers = CellMarkers(cell)
+        self.parts_pub = self.create_publisher(PartStates, 'parts', STREAM_QOS)
+        self.barrier_pub = self.create_publisher(LightBarrierStates, 'light_barriers',
+                                                 STREAM_QOS)
+        self.edge_pub = self.create_publisher(LightBarrierEdge, 'light_barrier_edges',
+                                              EDGE_QOS)
+        self.markers_pub = self.create_publisher(MarkerArray, 'markers', SLOW_QOS)
+
+    def publish_step(self, inp: StepInput) -> None:
+        """Publish the parts, barrier states and any barrier edges of the step just taken."""
+        stage = self.stage
+        ids, part_type, x, y, yaw, vx, vy, wz = stage.parts()
+        self.parts_pub.publish(self._parts.encode(inp.time_ns, inp.step, ids, part_type, x, y,
+                                                  yaw, vx, vy, wz))
+        blocked, edge_count = stage.barrier_blocked(), stage.barrier_edge_count()
+        self.barrier_pub.publish(self._barriers.encode(inp.time_ns, inp.step, blocked,
+                                                       edge_count))
+        barrier, rising, time_ns, part_id = stage.edges()
+        for i in range(len(barrier)):
+            self.edge_pub.publish(cdr.encode_light_barrier_edge(
+                int(time_ns[i]), self._frame, self._barrier_names[barrier[i]], bool(rising[i]),
+                int(part_id[i])))
+        if self.markers_every and inp.step % self.markers_every == 0:
+            self.markers_pub.publish(self._markers.build(
+                inp.time_ns, part_type, x, y, blocked, inp.actuator_position))
+
+    def spawn_reply(self, body: bytes) -> bytes:
+        """Place parts for a split-layout spawn request: ``E`` + message, or ``I`` + ids."""
+        type_index = int.from_bytes(body[:2], 'little')
+        poses = np.frombuffer(body[2:], '<f8').reshape(3, -1)
+        try:
+            ids = self.stage.spawn(type_index, poses[0].copy(), poses[1].copy(),
+                                   poses[2].copy())
+        except ValueError as exc:
+            return b'E' + str(exc).encode()
+        return b'I' + np.asarray(ids, '<u4').tobytes()
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Run ``micro_simulator`` as its own process, following a split-layout coordinator."""
+    from conveyor_twin.ros.standalone import run_scale_node
+    return run_scale_node(MicroNode, MicroStage, argv)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

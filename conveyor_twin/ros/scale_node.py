@@ -1,0 +1,91 @@
+"""What the two scale nodes share: the split-layout coupling and the markers cadence."""
+
+import json
+from typing import Dict, Optional
+
+from rclpy.node import Node
+from std_msgs.msg import UInt8MultiArray
+
+from conveyor_twin.cell import load_cell
+from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.ros import coupling
+from conveyor_twin.ros.qos import COUPLING_QOS
+
+MICRO_ROLE = 1
+MACRO_ROLE = 2
+
+
+def encode_counters(counters: Dict[str, float]) -> bytes:
+    """Return a stage's part-balance counters as the reply bytes of a step."""
+    return json.dumps(counters, sort_keys=True).encode()
+
+
+def decode_counters(prefix: str, reply: bytes) -> Dict[str, float]:
+    """Return the counters of :func:`encode_counters` bytes, keys prefixed ``prefix_``."""
+    if not reply:
+        return {}
+    return {f'{prefix}_{k}': v for k, v in json.loads(reply).items()}
+
+
+class ScaleNode(Node):
+    """A node that owns a scale stage and publishes its streams after every step.
+
+    Composed, the coordinator's step listener calls :meth:`publish_step`; split
+    (``remote=True``), the node subscribes to the coupling topic, advances its own stage with
+    each step input, publishes, and reports the step done.
+
+    :param stage: the scale's core wrapper (``advance``, ``reset``).
+    :param role: :data:`MICRO_ROLE` or :data:`MACRO_ROLE`.
+    :param markers_rate: MarkerArray rate [Hz]; 0 disables markers.
+    """
+
+    def __init__(self, name: str, stage, role: int, *, context=None,
+                 namespace: Optional[str] = None, remote: bool = False,
+                 markers_rate: float = 30.0, step_s: float = 1e-3,
+                 parameter_overrides=None) -> None:
+        super().__init__(name, context=context, namespace=namespace,
+                         parameter_overrides=parameter_overrides or [])
+        self.stage = stage
+        self.role = role
+        self.markers_every = (max(1, round(1.0 / (markers_rate * step_s)))
+                              if markers_rate > 0 else 0)
+        if remote:
+            self._done_pub = self.create_publisher(UInt8MultiArray, coupling.DONE_TOPIC,
+                                                   COUPLING_QOS)
+            self.create_subscription(UInt8MultiArray, coupling.COUPLING_TOPIC,
+                                     self._on_coupling, COUPLING_QOS, raw=True)
+
+    def publish_step(self, inp: StepInput) -> None:
+        """Publish this scale's streams for the step just taken."""
+        raise NotImplementedError
+
+    def spawn_reply(self, body: bytes) -> bytes:
+        """Place parts for a split-layout spawn request; return the reply bytes."""
+        return b''
+
+    def _on_coupling(self, data: bytes) -> None:
+        payload = coupling.from_cdr(data)
+        kind, body = payload[:1], payload[1:]
+        reply = b''
+        if kind == coupling.STEP:
+            inp = StepInput.unpack(body)
+            self.stage.advance(inp)
+            self.publish_step(inp)
+            step = inp.step
+            reply = encode_counters(self.stage.counters())
+        elif kind == coupling.RESET:
+            seed = int.from_bytes(body[:8], 'little')
+            cell_file = body[8:].decode()
+            cell = load_cell(cell_file) if cell_file else self.stage.cell
+            self.stage.reset(cell, seed)
+            step = 0
+        elif kind == coupling.SPAWN:
+            reply = self.spawn_reply(body)
+            step = self._last_step
+        else:
+            self.get_logger().error(f'unknown coupling payload {kind!r}; ignored')
+            return
+        self._last_step = step
+        self._done_pub.publish(coupling.to_cdr(coupling.done(self.role, step, reply)))
+
+    _last_step = 0

@@ -1,0 +1,158 @@
+"""The split layout: micro, macro and coordinator nodes as three processes.
+
+``scale_coordinator`` (this module's :func:`coordinator_main`) drives time; every step it sends
+the step input over the coupling topic and waits for both scale nodes to report the step done.
+``conveyor-twin run --split`` starts the three processes and prints the coordinator's summary.
+"""
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from typing import Dict, List, Optional
+
+import rclpy
+from rclpy.context import Context
+
+from conveyor_twin.cell import CellError, load_cell
+from conveyor_twin.coord.runner import Runner
+from conveyor_twin.coord.timing import TimeMode
+from conveyor_twin.coord.twin import Twin
+from conveyor_twin.ros.compose import make_executor, spin_until
+from conveyor_twin.ros.coordinator_node import CoordinatorNode
+from conveyor_twin.ros.params import declare_twin_parameters
+from conveyor_twin.ros.scale_node import decode_counters, MACRO_ROLE, MICRO_ROLE
+
+SCALE_CONNECT_TIMEOUT = 30.0  # s for the scale processes to appear and match
+SUMMARY_PREFIX = 'conveyor_twin summary: '
+
+
+def _remote_counters(node: CoordinatorNode) -> Dict[str, float]:
+    replies = node.last_replies()
+    return {**decode_counters('micro', replies.get(MICRO_ROLE, b'')),
+            **decode_counters('macro', replies.get(MACRO_ROLE, b''))}
+
+
+def coordinator_main(argv: Optional[List[str]] = None) -> int:
+    """Run ``scale_coordinator`` as its own process (split layout); print a summary line."""
+    context = Context()
+    rclpy.init(args=argv if argv is not None else sys.argv, context=context,
+               signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    bootstrap = rclpy.create_node('scale_coordinator_parameters', context=context,
+                                  start_parameter_services=False)
+    try:
+        params = declare_twin_parameters(bootstrap)
+    finally:
+        bootstrap.destroy_node()
+    try:
+        cell = load_cell(params.cell_file)
+    except CellError as exc:
+        print(f'invalid cell: {exc}', file=sys.stderr)
+        context.try_shutdown()
+        return 1
+    seed = cell.settings.seed if params.seed < 0 else params.seed
+    max_steps = round(params.duration / cell.settings.step) if params.duration > 0 else None
+    twin = Twin(cell, seed=seed)
+    runner = Runner(twin, params.mode, max_steps=max_steps)
+    holder: Dict[str, CoordinatorNode] = {}
+    node = CoordinatorNode(twin, runner, context=context, remote_roles=(MICRO_ROLE, MACRO_ROLE),
+                           counters=lambda: _remote_counters(holder['node']))
+    holder['node'] = node
+    executor = make_executor(context)
+    executor.add_node(node)
+    spin_stop = threading.Event()
+    spinner = threading.Thread(target=spin_until, args=(executor, spin_stop), daemon=True)
+    spinner.start()
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    code = 0
+    if not node.wait_for_scales(SCALE_CONNECT_TIMEOUT):
+        node.get_logger().error('micro_simulator and macro_simulator did not connect within '
+                                f'{SCALE_CONNECT_TIMEOUT:g} s')
+        code = 1
+    else:
+        runner.start()
+        while not stop.is_set():
+            if params.mode is not TimeMode.LOCKSTEP and not runner.running:
+                break
+            stop.wait(0.05)
+        runner.stop()
+        if runner.error is not None:
+            node.get_logger().error(f'simulation stopped: {runner.error!r}')
+            code = 1
+    print(SUMMARY_PREFIX + json.dumps(node.summary(), sort_keys=True), flush=True)
+    spin_stop.set()
+    spinner.join(5.0)
+    executor.shutdown(timeout_sec=5.0)
+    node.destroy_node()
+    context.try_shutdown()
+    return code
+
+
+def _ros_args(cell_file: str, seed: Optional[int], mode: str, duration: float,
+              namespace: Optional[str], markers_rate: float) -> List[str]:
+    args = ['--ros-args', '-p', f'cell_file:={cell_file}', '-p', f'mode:={mode}',
+            '-p', f'duration:={float(duration)}', '-p', f'markers_rate:={float(markers_rate)}']
+    if seed is not None:
+        args += ['-p', f'seed:={seed}']
+    if namespace:
+        args += ['-r', f'__ns:={namespace}']
+    return args
+
+
+def run_split(args: argparse.Namespace) -> int:
+    """Start the three node processes, wait for the coordinator, print its summary."""
+    from conveyor_twin.cli.run import _print_summary
+
+    cell_file = os.path.abspath(args.cell) if args.cell else ''
+    if cell_file:
+        try:
+            load_cell(cell_file)
+        except CellError as exc:
+            print(f'invalid cell: {exc}', file=sys.stderr)
+            return 1
+    ros_args = _ros_args(cell_file, args.seed, args.mode, args.duration, args.namespace,
+                         args.markers_rate)
+    env = dict(os.environ)
+    modules = ['conveyor_twin.ros.micro_node', 'conveyor_twin.ros.macro_node']
+    scales = [subprocess.Popen([sys.executable, '-m', m] + ros_args, env=env)
+              for m in modules]
+    coordinator = subprocess.Popen(
+        [sys.executable, '-m', 'conveyor_twin.ros.split'] + ros_args, env=env,
+        stdout=subprocess.PIPE, text=True)
+    summary = None
+    try:
+        for line in coordinator.stdout:
+            if line.startswith(SUMMARY_PREFIX):
+                summary = json.loads(line[len(SUMMARY_PREFIX):])
+            elif not args.quiet:
+                print(line, end='', file=sys.stderr)
+        code = coordinator.wait()
+    except KeyboardInterrupt:
+        coordinator.send_signal(signal.SIGINT)
+        code = coordinator.wait(30)
+    finally:
+        for proc in scales:
+            proc.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + 10.0
+        for proc in scales:
+            try:
+                proc.wait(max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+    if summary is None:
+        print('the coordinator process ended without a summary', file=sys.stderr)
+        return code or 1
+    summary['layout'] = 'split'
+    _print_summary(summary, args.json)
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(coordinator_main())

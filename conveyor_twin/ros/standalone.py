@@ -1,0 +1,51 @@
+"""Run one scale node as its own process (split layout)."""
+
+import signal
+import sys
+import threading
+from typing import List, Optional
+
+import rclpy
+from rclpy.context import Context
+
+from conveyor_twin.cell import CellError, load_cell
+from conveyor_twin.ros.compose import make_executor, spin_until
+from conveyor_twin.ros.params import declare_twin_parameters
+
+
+def run_scale_node(node_class, stage_class, argv: Optional[List[str]] = None) -> int:
+    """Build the stage from the node parameters, serve the coupling topic until shutdown."""
+    context = Context()
+    rclpy.init(args=argv if argv is not None else sys.argv, context=context,
+               signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    bootstrap = rclpy.create_node(node_class.__name__.lower() + '_parameters', context=context,
+                                  start_parameter_services=False)
+    try:
+        params = declare_twin_parameters(bootstrap)
+    finally:
+        bootstrap.destroy_node()
+    try:
+        cell = load_cell(params.cell_file)
+    except CellError as exc:
+        print(f'invalid cell: {exc}', file=sys.stderr)
+        context.try_shutdown()
+        return 1
+    seed = cell.settings.seed if params.seed < 0 else params.seed
+    stage = stage_class(cell, seed)
+    node = node_class(stage, context=context, remote=True, markers_rate=params.markers_rate,
+                      step_s=cell.settings.step)
+    executor = make_executor(context)
+    executor.add_node(node)
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    spin_stop = threading.Event()
+    spinner = threading.Thread(target=spin_until, args=(executor, spin_stop), daemon=True)
+    spinner.start()
+    stop.wait()
+    spin_stop.set()
+    spinner.join(5.0)
+    executor.shutdown(timeout_sec=5.0)
+    node.destroy_node()
+    context.try_shutdown()
+    return 0
