@@ -96,8 +96,10 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
 
 def _ros_args(cell_file: str, seed: Optional[int], mode: str, duration: float,
               namespace: Optional[str], markers_rate: float) -> List[str]:
-    args = ['--ros-args', '-p', f'cell_file:={cell_file}', '-p', f'mode:={mode}',
-            '-p', f'duration:={float(duration)}', '-p', f'markers_rate:={float(markers_rate)}']
+    args = ['--ros-args', '-p', f'mode:={mode}', '-p', f'duration:={float(duration)}',
+            '-p', f'markers_rate:={float(markers_rate)}']
+    if cell_file:  # rcl cannot parse an empty override; empty is the default anyway
+        args += ['-p', f'cell_file:={cell_file}']
     if seed is not None:
         args += ['-p', f'seed:={seed}']
     if namespace:
