@@ -15,17 +15,14 @@ import threading
 import time
 from typing import Dict, List, Optional
 
-import rclpy
-from rclpy.context import Context
-
 from conveyor_twin.cell import CellError, load_cell
 from conveyor_twin.coord.runner import Runner
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.coord.twin import Twin
 from conveyor_twin.ros.compose import make_executor, spin_until
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
-from conveyor_twin.ros.params import declare_twin_parameters
 from conveyor_twin.ros.scale_node import decode_counters, MACRO_ROLE, MICRO_ROLE
+from conveyor_twin.ros.standalone import start_process
 
 SCALE_CONNECT_TIMEOUT = 30.0  # s for the scale processes to appear and match
 SUMMARY_PREFIX = 'conveyor_twin summary: '
@@ -39,22 +36,10 @@ def _remote_counters(node: CoordinatorNode) -> Dict[str, float]:
 
 def coordinator_main(argv: Optional[List[str]] = None) -> int:
     """Run ``scale_coordinator`` as its own process (split layout); print a summary line."""
-    context = Context()
-    rclpy.init(args=argv if argv is not None else sys.argv, context=context,
-               signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    bootstrap = rclpy.create_node('scale_coordinator_parameters', context=context,
-                                  start_parameter_services=False)
-    try:
-        params = declare_twin_parameters(bootstrap)
-    finally:
-        bootstrap.destroy_node()
-    try:
-        cell = load_cell(params.cell_file)
-    except CellError as exc:
-        print(f'invalid cell: {exc}', file=sys.stderr)
-        context.try_shutdown()
+    started = start_process('scale_coordinator', argv)
+    if started is None:
         return 1
-    seed = cell.settings.seed if params.seed < 0 else params.seed
+    context, params, cell, seed = started
     max_steps = round(params.duration / cell.settings.step) if params.duration > 0 else None
     twin = Twin(cell, seed=seed)
     runner = Runner(twin, params.mode, max_steps=max_steps)

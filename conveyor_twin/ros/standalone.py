@@ -13,12 +13,16 @@ from conveyor_twin.ros.compose import make_executor, spin_until
 from conveyor_twin.ros.params import declare_twin_parameters
 
 
-def run_scale_node(node_class, stage_class, argv: Optional[List[str]] = None) -> int:
-    """Build the stage from the node parameters, serve the coupling topic until shutdown."""
+def start_process(name: str, argv: Optional[List[str]] = None):
+    """Initialise rclpy for a node process and read its parameters and cell.
+
+    :param name: node name (the parameters are read by a helper node ``<name>_parameters``).
+    :return: (context, parameters, cell, seed), or None after printing why the cell is invalid.
+    """
     context = Context()
     rclpy.init(args=argv if argv is not None else sys.argv, context=context,
                signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    bootstrap = rclpy.create_node(node_class.__name__.lower() + '_parameters', context=context,
+    bootstrap = rclpy.create_node(name + '_parameters', context=context,
                                   start_parameter_services=False)
     try:
         params = declare_twin_parameters(bootstrap)
@@ -29,8 +33,17 @@ def run_scale_node(node_class, stage_class, argv: Optional[List[str]] = None) ->
     except CellError as exc:
         print(f'invalid cell: {exc}', file=sys.stderr)
         context.try_shutdown()
-        return 1
+        return None
     seed = cell.settings.seed if params.seed < 0 else params.seed
+    return context, params, cell, seed
+
+
+def run_scale_node(node_class, stage_class, argv: Optional[List[str]] = None) -> int:
+    """Build the stage from the node parameters, serve the coupling topic until shutdown."""
+    started = start_process(node_class.__name__.lower(), argv)
+    if started is None:
+        return 1
+    context, params, cell, seed = started
     stage = stage_class(cell, seed)
     node = node_class(stage, context=context, remote=True, markers_rate=params.markers_rate,
                       step_s=cell.settings.step)
