@@ -7,6 +7,7 @@ step, whatever the process layout.
 import numpy as np
 
 from conveyor_twin.cell.model import Cell
+from conveyor_twin.micro.drive import ramp  # the one rate limit both scales use (numba)
 
 
 class Actuation:
@@ -33,17 +34,6 @@ class Actuation:
 
     def advance(self) -> None:
         """Move every actual value one step toward its target within its rate limit."""
-        _approach(self.belt_speed, self.belt_target, self._belt_dv)
-        _approach(self.actuator_position, self.actuator_target, self._actuator_dx)
+        ramp(self.belt_speed, self.belt_target, self._belt_dv)
+        ramp(self.actuator_position, self.actuator_target, self._actuator_dx)
 
-
-def _approach(value: np.ndarray, target: np.ndarray, limit: np.ndarray) -> None:
-    """Move ``value`` toward ``target`` by at most ``limit`` in place, landing on it exactly."""
-    for i in range(value.size):
-        diff = target[i] - value[i]
-        if abs(diff) <= limit[i]:
-            value[i] = target[i]
-        elif diff > 0.0:
-            value[i] += limit[i]
-        else:
-            value[i] -= limit[i]

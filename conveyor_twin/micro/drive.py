@@ -47,7 +47,7 @@ def belt_table(belts: Sequence[Belt], dt: float) -> np.ndarray:
 def ramp(value, target, limit):
     """Move ``value`` toward ``target`` by at most ``limit`` in place, landing on it exactly.
 
-    Same arithmetic as the coordinator's ramp, so both agree bit for bit.
+    The coordinator ramps belts and actuators with this same kernel.
     """
     for i in range(value.size):
         diff = target[i] - value[i]
