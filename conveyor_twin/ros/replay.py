@@ -336,6 +336,24 @@ class Replayer:
         """Ask :meth:`run` to return after the current message (thread- and signal-safe)."""
         self.stopped = True
 
+    def wait_for_acks(self, timeout: float) -> bool:
+        """Wait until every subscriber acknowledged what was published (reliable topics).
+
+        A reliable writer that is destroyed right after its last ``publish`` can take
+        unacknowledged samples with it; the last messages of a replay would be lost.
+
+        :param timeout: longest wait, shared by all publishers [s].
+        :return: True if everything was acknowledged in time.
+        """
+        from rclpy.duration import Duration
+
+        deadline = time.monotonic() + timeout
+        ok = True
+        for pub in self.publishers.values():
+            left = max(0.0, deadline - time.monotonic())
+            ok = pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))) and ok
+        return ok
+
     def run(self) -> ReplayStats:
         """Publish until the end of the recording (or forever with ``loop``, until stopped).
 
@@ -404,6 +422,9 @@ def build_parser() -> argparse.ArgumentParser:
                    'subscriber')
     p.add_argument('--delay', type=float, default=0.0,
                    help='wait this long before the first message (after matching) [s]')
+    p.add_argument('--linger', type=float, default=5.0, metavar='SECONDS',
+                   help='at the end, wait up to this long until reliable subscribers have '
+                   'acknowledged every message [s]')
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
     return p
 
@@ -448,6 +469,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'conveyor-twin replay: {err}', file=sys.stderr)
         stats, code = replayer.stats, 1
     finally:
+        if not replayer.wait_for_acks(args.linger):
+            print('conveyor-twin replay: not every subscriber acknowledged the last messages '
+                  f'within {args.linger:g} s', file=sys.stderr, flush=True)
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         node.destroy_node()
