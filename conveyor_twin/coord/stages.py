@@ -5,8 +5,10 @@
 the coordinator's :class:`StepInput` (actual belt speeds and actuator positions of the step),
 so both scales see the same actuation whatever the process layout.
 
-Scale hand-over between zones (issue 6) is not wired yet: the micro scale simulates the whole
-cell and the macro grids evolve independently.
+Scale hand-over: the micro scale simulates the whole cell; a
+:class:`~conveyor_twin.coord.scale.ScaleCoupling` stepped after both stages (the :class:`Twin`
+adds it when it steps both locally) moves parts and mass between them, and light barriers in
+``macro`` zones take their edges from the density (:mod:`conveyor_twin.coord.macro_barriers`).
 """
 
 from typing import Dict, List, Tuple
@@ -39,6 +41,7 @@ class MicroStage:
         self.sim = MicroSim(cell, seed=seed)
         self._dt_ns = step_ns(cell.settings.step)
         self._edges = _EMPTY_EDGES
+        self.coupling = None
 
     def advance(self, inp: StepInput) -> None:
         """Apply the step's actuation, advance one step, collect its barrier edges."""
@@ -56,17 +59,45 @@ class MicroStage:
         v = self.sim.parts_view()
         return v.id, v.part_type, v.x, v.y, v.yaw, v.vx, v.vy, v.wz
 
+    def _macro_barriers(self):
+        c = self.coupling
+        return c.barriers if c is not None and c.barriers else None
+
     def barrier_blocked(self) -> np.ndarray:
         """Blocked flag of every light barrier at the end of the step."""
-        return self.sim.blocked
+        mb = self._macro_barriers()
+        if mb is None:
+            return self.sim.blocked
+        out = self.sim.blocked.copy()
+        for b in mb:
+            out[b.index] = b.blocked
+        return out
 
     def barrier_edge_count(self) -> np.ndarray:
         """Edges seen so far by every light barrier (uint32)."""
-        return self.sim.edge_count
+        mb = self._macro_barriers()
+        if mb is None:
+            return self.sim.edge_count
+        out = self.sim.edge_count.copy()
+        for b in mb:
+            out[b.index] = b.edge_count
+        return out
 
     def edges(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Return the last step's edges: (barrier index, blocked, time [ns], part id)."""
-        return self._edges
+        """Return the last step's edges: (barrier index, blocked, time [ns], part id).
+
+        Edges of barriers in macro zones come last, with part id 0.
+        """
+        c = self.coupling
+        if c is None or not c.macro_edges:
+            return self._edges
+        ev = c.macro_edges
+        idx = np.array([e[0] for e in ev], dtype=np.int64)
+        blocked = np.array([e[1] for e in ev], dtype=bool)
+        t = np.rint(np.array([e[2] for e in ev]) * 1e9).astype(np.int64)
+        b, k, tt, p = self._edges
+        return (np.concatenate([b, idx]), np.concatenate([k, blocked]),
+                np.concatenate([tt, t]), np.concatenate([p, np.zeros(len(ev), np.uint32)]))
 
     def spawn(self, part_type: int, x: np.ndarray, y: np.ndarray,
               yaw: np.ndarray) -> np.ndarray:
@@ -88,7 +119,7 @@ class MicroStage:
 
 
 class MacroStage:
-    """Macro scale: the density of every zone whose policy is ``macro``."""
+    """Macro scale: the density of every zone whose policy is ``macro`` or ``auto``."""
 
     def __init__(self, cell: Cell, seed: int = 0) -> None:
         self.reset(cell, seed)
@@ -97,7 +128,8 @@ class MacroStage:
         """Restart with empty grids."""
         self.cell = cell
         self.grids: List[MacroSim] = [MacroSim(cell, zone) for zone in cell.zones
-                                      if zone.policy == 'macro']
+                                      if zone.policy in ('macro', 'auto')]
+        self.coupling = None
         self.names = [g.zone.name for g in self.grids]
 
     def advance(self, inp: StepInput) -> None:
@@ -108,7 +140,13 @@ class MacroStage:
             grid.step(1)
 
     def counters(self) -> Dict[str, float]:
-        """Part balance over all grids: entered, left, in flight (fractional parts)."""
-        return {'entered': float(sum(g.parts_in + g.parts_deposited for g in self.grids)),
+        """Part balance over all grids: entered, left, in flight (fractional parts).
+
+        With a scale coupling: the whole cell's ledger (``balance_*``) is added.
+        """
+        out = {'entered': float(sum(g.parts_in + g.parts_deposited for g in self.grids)),
                 'left': float(sum(g.parts_out + g.parts_taken for g in self.grids)),
                 'in_flight': float(sum(g.total_parts() for g in self.grids))}
+        if self.coupling is not None and self.coupling.enabled:
+            out.update({f'balance_{k}': v for k, v in self.coupling.ledger().items()})
+        return out

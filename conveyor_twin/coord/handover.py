@@ -1,0 +1,170 @@
+"""Compiled kernels of the micro <-> macro hand-over (no ROS imports, allocation-free).
+
+Every kernel works on one macro grid: density ``rho`` ``(ny, nx)`` [parts/m^2], origin
+``(ox, oy)`` [m], cell edge ``h`` [m], an ``active`` mask ``(ny, nx)`` (1: the cell is simulated
+macro now) and the grid's ``solid`` mask (1: obstacle or engaged actuator).
+
+- :func:`capture_mask` marks the micro parts whose centre lies in an active cell;
+- :func:`deposit_disc` adds exactly one part's worth of mass over the footprint disc of a
+  captured part, restricted to active fluid cells (renormalised, so the amount is exact);
+- :func:`take_inactive` moves the mass that flowed into inactive cells into per-cell
+  accumulators (it is released there as whole parts);
+- :func:`window_candidate` finds where an accumulator window holds at least one part, and
+  :func:`window_subtract` removes one part from it (proportionally, so nothing goes negative).
+"""
+
+from numba import njit
+import numpy as np
+
+# Sub-samples per cell edge when the footprint disc is rasterised.
+DEPOSIT_SAMPLES = 8
+
+
+@njit(cache=True)
+def capture_mask(x: np.ndarray, y: np.ndarray, n: int, ox: float, oy: float, h: float,
+                 active: np.ndarray, mask: np.ndarray) -> int:
+    """Set ``mask[k]`` for the parts ``k < n`` whose centre is in an active cell; return how many.
+
+    ``mask`` is only written (True) for captured parts; the caller clears it before.
+    """
+    ny, nx = active.shape
+    count = 0
+    for k in range(n):
+        fx = (x[k] - ox) / h
+        fy = (y[k] - oy) / h
+        if fx < 0.0 or fy < 0.0 or fx >= nx or fy >= ny:
+            continue
+        if active[int(fy), int(fx)]:
+            mask[k] = True
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def deposit_disc(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: float, oy: float,
+                 h: float, px: float, py: float, radius: float, amount: float) -> None:
+    """Add ``amount`` parts over the disc of ``radius`` [m] at ``(px, py)`` [m], exactly.
+
+    Weights are the disc's area in each active fluid cell (sub-sampled); if none is left the
+    nearest active fluid cell takes it all (rings of growing size, row-major order).
+    """
+    ny, nx = rho.shape
+    ic = min(max(int((px - ox) / h), 0), nx - 1)
+    jc = min(max(int((py - oy) / h), 0), ny - 1)
+    rc = int(radius / h) + 1
+    s = DEPOSIT_SAMPLES
+    r2 = radius * radius
+    total = 0.0
+    for j in range(max(0, jc - rc), min(ny, jc + rc + 1)):
+        for i in range(max(0, ic - rc), min(nx, ic + rc + 1)):
+            if not active[j, i] or solid[j, i]:
+                continue
+            w = 0
+            for a in range(s):
+                yy = oy + (j + (a + 0.5) / s) * h - py
+                for b in range(s):
+                    xx = ox + (i + (b + 0.5) / s) * h - px
+                    if xx * xx + yy * yy <= r2:
+                        w += 1
+            total += w
+    inv = 1.0 / (h * h)
+    if total > 0.0:
+        scale = amount * inv / total
+        for j in range(max(0, jc - rc), min(ny, jc + rc + 1)):
+            for i in range(max(0, ic - rc), min(nx, ic + rc + 1)):
+                if not active[j, i] or solid[j, i]:
+                    continue
+                w = 0
+                for a in range(s):
+                    yy = oy + (j + (a + 0.5) / s) * h - py
+                    for b in range(s):
+                        xx = ox + (i + (b + 0.5) / s) * h - px
+                        if xx * xx + yy * yy <= r2:
+                            w += 1
+                if w:
+                    rho[j, i] += scale * w
+        return
+    for ring in range(max(nx, ny)):
+        for j in range(max(0, jc - ring), min(ny, jc + ring + 1)):
+            for i in range(max(0, ic - ring), min(nx, ic + ring + 1)):
+                if max(abs(j - jc), abs(i - ic)) != ring:
+                    continue
+                if active[j, i] and not solid[j, i]:
+                    rho[j, i] += amount * inv
+                    return
+    rho[jc, ic] += amount * inv  # no active fluid cell at all: keep the mass anyway
+
+
+@njit(cache=True)
+def take_inactive(rho: np.ndarray, active: np.ndarray, h: float, acc: np.ndarray) -> float:
+    """Move the mass of inactive cells into ``acc`` [parts] (per cell); return the total [parts]."""
+    ny, nx = rho.shape
+    hh = h * h
+    total = 0.0
+    for j in range(ny):
+        for i in range(nx):
+            if not active[j, i] and rho[j, i] != 0.0:
+                m = rho[j, i] * hh
+                acc[j, i] += m
+                total += m
+                rho[j, i] = 0.0
+    return total
+
+
+@njit(cache=True)
+def take_mask(rho: np.ndarray, mask: np.ndarray, h: float) -> float:
+    """Remove the mass of the cells where ``mask`` is set; return it [parts]."""
+    ny, nx = rho.shape
+    hh = h * h
+    total = 0.0
+    for j in range(ny):
+        for i in range(nx):
+            if mask[j, i] and rho[j, i] != 0.0:
+                total += rho[j, i] * hh
+                rho[j, i] = 0.0
+    return total
+
+
+@njit(cache=True)
+def window_candidate(acc: np.ndarray, start: int, w: int, threshold: float,
+                     out: np.ndarray) -> int:
+    """Find the first cell (row-major, from flat index ``start``) whose window holds a part.
+
+    The window is the ``(2 w + 1)^2`` block around the cell. ``out`` receives
+    ``(j, i, sum, centroid_j, centroid_i)`` (centroid in cell units, mass-weighted).
+    Return the flat index of the cell, or -1.
+    """
+    ny, nx = acc.shape
+    for flat in range(start, ny * nx):
+        j = flat // nx
+        i = flat - j * nx
+        if acc[j, i] <= 0.0:
+            continue
+        total = 0.0
+        cj = 0.0
+        ci = 0.0
+        for jj in range(max(0, j - w), min(ny, j + w + 1)):
+            for ii in range(max(0, i - w), min(nx, i + w + 1)):
+                a = acc[jj, ii]
+                total += a
+                cj += a * jj
+                ci += a * ii
+        if total >= threshold:
+            out[0] = j
+            out[1] = i
+            out[2] = total
+            out[3] = cj / total
+            out[4] = ci / total
+            return flat
+    return -1
+
+
+@njit(cache=True)
+def window_subtract(acc: np.ndarray, j: int, i: int, w: int, total: float,
+                    amount: float) -> None:
+    """Remove ``amount`` from the window around ``(j, i)`` holding ``total``, proportionally."""
+    ny, nx = acc.shape
+    keep = 1.0 - amount / total
+    for jj in range(max(0, j - w), min(ny, j + w + 1)):
+        for ii in range(max(0, i - w), min(nx, i + w + 1)):
+            acc[jj, ii] *= keep

@@ -1,0 +1,387 @@
+"""Scale coordination: micro and macro zones, exact hand-over, ``auto`` switching, the ledger.
+
+:class:`ScaleCoupling` is a stage stepped after the micro and macro stages. The micro simulator
+covers the whole cell; every macro grid (zones of policy ``macro`` or ``auto``) has an ``active``
+cell mask (all cells for ``macro``; the cells of macro tiles for ``auto``). Each step:
+
+1. micro -> macro: micro parts whose centre lies in an active cell are removed and deposited as
+   exactly one part's worth of mass over their footprint disc (active fluid cells only);
+2. sinks: macro mass in cells whose centre lies in a sink, and boundary outflow through faces
+   leading into a sink, leave the cell;
+3. macro -> micro: boundary outflow accumulates per boundary face, mass that flowed into
+   inactive cells per cell; wherever a window of ``2 w + 1`` neighbouring accumulators (``w``
+   cells cover a part's radius) holds a whole part, one part of the macro part type is placed
+   at the window's mass centre (outside the grid for faces), with the local belt velocity,
+   without overlap (a few deterministic offsets are tried; if all overlap, it waits); one part
+   is taken from the window, the fractional remainder stays;
+4. ``auto`` zones re-evaluate their tiles (:mod:`conveyor_twin.coord.tiles`); a tile that turns
+   macro captures its parts in step 1 of the next step, one that turns micro gives its mass to
+   the accumulators (count-exact release as whole parts, remainders carried);
+5. light barriers in ``macro`` zones follow :mod:`conveyor_twin.coord.macro_barriers`;
+6. the ledger: ``entered = micro parts + integral of rho + pending + left`` where ``pending``
+   is the accumulated mass not yet released; checked every step when ``check`` is on.
+
+Parts released from the macro scale are new micro parts (new ids); the macro scale carries one
+part type (the cell's first), so parts of other types deposited into it come back as that type.
+"""
+
+import math
+import os
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from conveyor_twin.cell.model import Cell
+from conveyor_twin.coord import handover as _ho
+from conveyor_twin.coord.macro_barriers import MacroBarrier
+from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.coord.tiles import AutoTiles, CHECK_STEPS
+from conveyor_twin.macro.solver import MacroSim
+from conveyor_twin.micro.sim import MicroSim
+
+# Largest allowed |ledger residual| [parts] when checking.
+BALANCE_TOLERANCE = 1e-9
+# Environment switch that turns the per-step ledger check on (debug runs).
+CHECK_ENV = 'CONVEYOR_TWIN_CHECK_BALANCE'
+# Offsets (in part diameters) tried when a released part would overlap: along, then across.
+_OFFSETS = ((0.0, 0.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0), (1.0, 1.0),
+            (-1.0, 1.0), (1.0, -1.0), (-1.0, -1.0), (2.0, 0.0), (-2.0, 0.0), (0.0, 2.0),
+            (0.0, -2.0))
+# Clearance [m] between a released part and the face it crosses.
+_CLEARANCE = 1e-4
+
+
+class BalanceError(RuntimeError):
+    """The part ledger does not balance (a hand-over lost or created mass)."""
+
+
+class _Region:
+    """One macro grid with its active mask, accumulators and sinks."""
+
+    def __init__(self, cell: Cell, sim: MacroSim, radius: float) -> None:
+        self.sim = sim
+        g = sim.grid
+        self.tiles: Optional[AutoTiles] = None
+        if sim.zone.policy == 'auto':
+            self.tiles = AutoTiles(cell, sim.zone, g)
+            self.active = self.tiles.cell_mask()
+        else:
+            self.active = np.ones((g.ny, g.nx), dtype=np.uint8)
+        self.acc = np.zeros((g.ny, g.nx))
+        # boundary faces: left/right (ny, 1), bottom/top (1, nx)
+        self.face_acc = [np.zeros((g.ny, 1)), np.zeros((g.ny, 1)), np.zeros((1, g.nx)),
+                         np.zeros((1, g.nx))]
+        self.w = max(1, int(math.ceil(radius / g.h)))
+        centres, normals = g.boundary_faces()
+        self.face_centres, self.face_normals = centres, normals
+        xc, yc = g.centres()
+        self.sink_cells = np.zeros((g.ny, g.nx), dtype=np.bool_)
+        face_out = centres + normals * radius
+        self.face_sink = np.zeros(g.n_boundary, dtype=np.bool_)
+        for sink in cell.sinks:
+            x0, y0, x1, y1 = sink.region
+            self.sink_cells |= (xc >= x0) & (xc <= x1) & (yc >= y0) & (yc <= y1)
+            self.face_sink |= ((face_out[:, 0] >= x0) & (face_out[:, 0] <= x1)
+                               & (face_out[:, 1] >= y0) & (face_out[:, 1] <= y1))
+        self.has_sink_cells = bool(self.sink_cells.any())
+        ny, nx = g.ny, g.nx
+        self.sides = [(0, ny), (ny, 2 * ny), (2 * ny, 2 * ny + nx), (2 * ny + nx, 2 * (ny + nx))]
+
+    def pending(self) -> float:
+        """Mass waiting in the accumulators [parts]."""
+        return float(self.acc.sum()) + sum(float(a.sum()) for a in self.face_acc)
+
+
+class ScaleCoupling:
+    """Hand-over between the micro stage and the macro stage's grids (a :class:`Stage`).
+
+    :param micro_stage: the :class:`~conveyor_twin.coord.stages.MicroStage`.
+    :param macro_stage: the :class:`~conveyor_twin.coord.stages.MacroStage`.
+    :param check: check the ledger every step (raise :class:`BalanceError`); None reads
+        the environment variable ``CONVEYOR_TWIN_CHECK_BALANCE``.
+    """
+
+    def __init__(self, micro_stage, macro_stage, *, check: Optional[bool] = None) -> None:
+        self.micro_stage = micro_stage
+        self.macro_stage = macro_stage
+        if check is None:
+            check = os.environ.get(CHECK_ENV, '') not in ('', '0')
+        self.check = bool(check)
+        self._bind()
+
+    # --- set-up ---
+    def _bind(self) -> None:
+        self.micro: MicroSim = self.micro_stage.sim
+        self.cell: Cell = self.micro.cell
+        cell = self.cell
+        self.part_type = 0
+        self.radius = cell.part_types[0].bounding_radius
+        self.regions = [_Region(cell, sim, self.radius) for sim in self.macro_stage.grids]
+        self.left_macro = 0.0
+        self.released = 0
+        self.captured = 0
+        self.step_index = 0
+        self.max_residual = 0.0
+        self._mask = np.zeros(self.micro.state.capacity, dtype=np.bool_)
+        self._cand = np.zeros(5)
+        self.barriers: List[MacroBarrier] = []
+        for index, barrier in enumerate(cell.light_barriers):
+            for region in self.regions:
+                if region.tiles is None and _inside(barrier, region.sim):
+                    self.barriers.append(MacroBarrier(index, barrier, region.sim, self.radius))
+                    break
+        self.macro_barrier_index = np.array([b.index for b in self.barriers], dtype=np.int64)
+        self.macro_edges: List[Tuple[int, bool, float]] = []
+        self.macro_stage.coupling = self
+        self.micro_stage.coupling = self
+
+    def reset(self, cell: Cell, seed: int) -> None:
+        """Rebind to the (reset) stages' new simulators."""
+        self._bind()
+
+    @property
+    def enabled(self) -> bool:
+        """True if the cell has macro grids to couple."""
+        return bool(self.regions)
+
+    # --- stepping ---
+    def advance(self, inp: StepInput) -> None:
+        """Hand parts and mass over after the micro and macro steps of ``inp.step``."""
+        self.step_index = inp.step
+        self.macro_edges = []
+        if not self.regions:
+            return
+        for region in self.regions:
+            self._capture(region)
+            self._sinks(region)
+            self._accumulate(region)
+            self._release(region)
+            if region.tiles is not None and inp.step % CHECK_STEPS == 0:
+                self._switch(region, inp.step)
+        if self.barriers:
+            t_end = inp.time_ns * 1e-9
+            for barrier in self.barriers:
+                barrier.advance(self.cell.settings.step, t_end, self.macro_edges)
+        if self.check:
+            self.check_balance()
+
+    def _capture(self, region: _Region) -> None:
+        sim, g = region.sim, region.sim.grid
+        micro = self.micro
+        n = micro.n
+        if n == 0:
+            return
+        P = micro.state
+        x, y = P.P[0], P.P[1]
+        mask = self._mask[:n]
+        mask[:] = False
+        count = _ho.capture_mask(x, y, n, g.origin_x, g.origin_y, g.h, region.active, mask)
+        if count == 0:
+            return
+        parts = micro.remove(mask=mask)
+        rho, solid = sim.density, sim.solid
+        radii = self._radii(parts.part_type)
+        for k in range(count):
+            _ho.deposit_disc(rho, region.active, solid, g.origin_x, g.origin_y, g.h,
+                             float(parts.x[k]), float(parts.y[k]), radii[k], 1.0)
+        sim.parts_deposited += float(count)
+        self.captured += count
+
+    def _radii(self, types: np.ndarray) -> np.ndarray:
+        table = np.array([math.sqrt(p.footprint_area / math.pi) for p in self.cell.part_types])
+        return table[types.astype(np.int64)]
+
+    def _sinks(self, region: _Region) -> None:
+        sim = region.sim
+        if region.has_sink_cells:
+            taken = _ho.take_mask(sim.density, region.sink_cells, sim.grid.h)
+            if taken:
+                sim.parts_taken += taken
+                self.left_macro += taken
+
+    def _accumulate(self, region: _Region) -> None:
+        sim = region.sim
+        out = sim.outflow
+        for side, (a, b) in enumerate(region.sides):
+            seg = out[a:b]
+            if not seg.any():
+                continue
+            sink = region.face_sink[a:b]
+            left = float(seg[sink].sum())
+            self.left_macro += left
+            region.face_acc[side].reshape(-1)[:] += np.where(sink, 0.0, seg)
+        if region.tiles is not None:
+            taken = _ho.take_inactive(sim.density, region.active, sim.grid.h, region.acc)
+            if taken:
+                sim.parts_taken += taken
+
+    def _release(self, region: _Region) -> None:
+        g = region.sim.grid
+        vc = region.sim.cell_velocity
+        for side, acc in enumerate(region.face_acc):
+            start = 0
+            a, b = region.sides[side]
+            while True:
+                flat = _ho.window_candidate(acc, start, region.w, 1.0, self._cand)
+                if flat < 0:
+                    break
+                j, i, total, cj, ci = self._cand
+                k = min(max(int(round(cj if side < 2 else ci)), 0), b - a - 1)
+                face = a + k
+                nx_, ny_ = region.face_normals[face]
+                if side < 2:
+                    px = region.face_centres[face][0]
+                    py = g.origin_y + (cj + 0.5) * g.h
+                else:
+                    px = g.origin_x + (ci + 0.5) * g.h
+                    py = region.face_centres[face][1]
+                px += nx_ * (self.radius + _CLEARANCE)
+                py += ny_ * (self.radius + _CLEARANCE)
+                bj, bi = _boundary_cell(side, k, g)
+                vx, vy = vc[bj, bi]
+                if self._place(px, py, vx, vy, (float(nx_), float(ny_)), False):
+                    _ho.window_subtract(acc, int(j), int(i), region.w, total, 1.0)
+                    continue
+                start = flat + 1
+        if region.tiles is None:
+            return
+        acc = region.acc
+        start = 0
+        while True:
+            flat = _ho.window_candidate(acc, start, region.w, 1.0, self._cand)
+            if flat < 0:
+                break
+            j, i, total, cj, ci = self._cand
+            px = g.origin_x + (ci + 0.5) * g.h
+            py = g.origin_y + (cj + 0.5) * g.h
+            vx, vy = vc[int(round(cj)), int(round(ci))]
+            if self._place(px, py, vx, vy, (1.0, 0.0), True):
+                _ho.window_subtract(acc, int(j), int(i), region.w, total, 1.0)
+                continue  # the same window may hold another part
+            start = flat + 1
+
+    def _place(self, x: float, y: float, vx: float, vy: float, normal: Tuple[float, float],
+               back: bool) -> bool:
+        """Place one macro-type part near ``(x, y)`` [m] without overlap; return success.
+
+        :param normal: outward direction; offsets against it are tried only if ``back``.
+        """
+        d = 2.0 * self.radius + _CLEARANCE
+        nx_, ny_ = normal
+        tx, ty = -ny_, nx_
+        for along, out in _OFFSETS:
+            if out < 0.0 and not back:
+                continue  # never back into the grid through a face
+            px = x + d * (along * tx + out * nx_)
+            py = y + d * (along * ty + out * ny_)
+            ids = self.micro.spawn(self.part_type, px, py, 0.0, vx, vy, 0.0, strict=False)
+            if ids[0] != 0:
+                self.released += 1
+                return True
+        return False
+
+    def _switch(self, region: _Region, step: int) -> None:
+        tiles = region.tiles
+        v = self.micro.parts_view()
+        if not tiles.decide(step, v.x, v.y, self.micro.n, region.sim.density):
+            return
+        self._apply_tiles(region)
+
+    def _apply_tiles(self, region: _Region) -> None:
+        new = region.tiles.cell_mask()
+        turned_macro = (new != 0) & (region.active == 0)
+        if turned_macro.any():
+            # pending mass of cells that turn macro goes back into the density
+            sim = region.sim
+            back = region.acc[turned_macro]
+            sim.density[turned_macro] += back / (sim.grid.h ** 2)
+            sim.parts_deposited += float(back.sum())
+            region.acc[turned_macro] = 0.0
+        region.active[:] = new
+        # cells that turned micro give their mass to the accumulators next step
+
+    def force_tiles(self, zone: str, macro: np.ndarray) -> None:
+        """Set the tile modes of ``auto`` zone ``zone`` now (tests and tools).
+
+        Parts in tiles turned macro are captured, and mass in tiles turned micro is released
+        (as far as room allows), immediately.
+        """
+        for region in self.regions:
+            if region.sim.zone.name == zone and region.tiles is not None:
+                region.tiles.force(macro, self.step_index)
+                self._apply_tiles(region)
+                self._capture(region)
+                self._accumulate_inactive(region)
+                self._release(region)
+                if self.check:
+                    self.check_balance()
+                return
+        raise KeyError(f'no auto zone named {zone!r}')
+
+    def _accumulate_inactive(self, region: _Region) -> None:
+        sim = region.sim
+        taken = _ho.take_inactive(sim.density, region.active, sim.grid.h, region.acc)
+        if taken:
+            sim.parts_taken += taken
+
+    # --- ledger ---
+    def ledger(self) -> Dict[str, float]:
+        """Return the part balance [parts]: entered, micro, macro, pending, left, residual.
+
+        ``entered`` counts parts from sources, spawn requests and macro inflow; parts released
+        by the hand-over are not new. ``residual = entered - micro - macro - pending - left``.
+        """
+        c = self.micro.counters()
+        micro_entered = c['entered'] - self.released
+        macro_in = sum(r.sim.parts_in for r in self.regions)
+        entered = float(micro_entered) + macro_in
+        macro = sum(r.sim.total_parts() for r in self.regions)
+        pending = sum(r.pending() for r in self.regions)
+        left = float(c['left']) + self.left_macro
+        micro_n = float(c['in_flight'])
+        residual = entered - micro_n - macro - pending - left - float(c['handed_over'])
+        return {'entered': entered, 'micro': micro_n, 'macro': macro, 'pending': pending,
+                'left': left, 'residual': residual, 'captured': float(self.captured),
+                'released': float(self.released)}
+
+    def check_balance(self) -> float:
+        """Check the ledger; return the residual [parts].
+
+        :raises BalanceError: if ``|residual|`` exceeds :data:`BALANCE_TOLERANCE`.
+        """
+        led = self.ledger()
+        r = led['residual']
+        self.max_residual = max(self.max_residual, abs(r))
+        if not abs(r) <= BALANCE_TOLERANCE:
+            msg = f'part ledger off by {r:.3e} parts at step {self.step_index}: {led}'
+            raise BalanceError(msg)
+        return r
+
+    def state_bytes(self) -> bytes:
+        """Return the coupling's dynamic state (accumulators, masks, counters) as bytes."""
+        parts = [np.array([self.left_macro, self.released, self.captured]).tobytes()]
+        for r in self.regions:
+            parts += [r.active.tobytes(), r.acc.tobytes()] + [a.tobytes() for a in r.face_acc]
+            if r.tiles is not None:
+                parts += [r.tiles.macro.tobytes(), r.tiles.last_switch.tobytes()]
+        for b in self.barriers:
+            parts.append(np.array([b.crossings, b.travel, b.blocked, b.edge_count]).tobytes())
+        return b''.join(parts)
+
+
+def _boundary_cell(side: int, k: int, g) -> Tuple[int, int]:
+    if side == 0:
+        return k, 0
+    if side == 1:
+        return k, g.nx - 1
+    if side == 2:
+        return 0, k
+    return g.ny - 1, k
+
+
+def _inside(barrier, sim: MacroSim) -> bool:
+    g = sim.grid
+    x1, y1 = g.origin_x + g.nx * g.h, g.origin_y + g.ny * g.h
+    mx = 0.5 * (barrier.start[0] + barrier.end[0])
+    my = 0.5 * (barrier.start[1] + barrier.end[1])
+    return g.origin_x <= mx <= x1 and g.origin_y <= my <= y1
