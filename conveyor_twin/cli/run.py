@@ -39,6 +39,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help='MarkerArray rate on `markers` [Hz]; 0 disables')
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
     p.add_argument('--quiet', action='store_true', help='no progress line')
+    from conveyor_twin.ros.record_tap import add_arguments
+    add_arguments(p)
     return p
 
 
@@ -91,6 +93,15 @@ def run_composed(args: argparse.Namespace) -> int:
     rclpy.init(context=context, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     twin = ComposedTwin(cell, seed=seed, mode=mode, context=context, namespace=args.namespace,
                         markers_rate=args.markers_rate, max_steps=max_steps)
+    from conveyor_twin.record.errors import RecordingError
+    from conveyor_twin.ros.record_tap import format_recording, start_recording
+    try:
+        recording = start_recording(twin, args, seed=seed, mode=mode.value)
+    except (ValueError, RecordingError) as exc:
+        print(f'conveyor-twin run: {exc}', file=sys.stderr)
+        twin.stop()
+        context.try_shutdown()
+        return 2
     interrupted = []
     signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
     signal.signal(signal.SIGTERM, lambda *_: interrupted.append(True))
@@ -113,10 +124,14 @@ def run_composed(args: argparse.Namespace) -> int:
     finally:
         twin.stop()
         summary = twin.coordinator.summary()
+        if recording is not None:
+            summary['recording'] = recording.close()
         context.try_shutdown()
     if not args.quiet and tty:
         print(file=sys.stderr)
     _print_summary(summary, args.json)
+    if recording is not None and not args.json:
+        print(format_recording(summary['recording']))
     if twin.runner.error is not None:
         print(f'simulation stopped with an error: {twin.runner.error!r}', file=sys.stderr)
         return 1
@@ -127,6 +142,10 @@ def main(argv: List[str]) -> int:
     """Entry point of ``conveyor-twin run``."""
     args = build_parser().parse_args(argv)
     ros_environment()
+    if args.split and (args.record or args.command):
+        print('conveyor-twin run: --record and --command need the composed layout (no --split)',
+              file=sys.stderr)
+        return 2
     if args.split:
         from conveyor_twin.ros.split import run_split
         return run_split(args)

@@ -168,6 +168,231 @@ _KEYVALUE = (
     'string value\n'
 )
 
+_VISUALIZATION_MARKERARRAY = (
+    'Marker[] markers\n'
+)
+
+_VISUALIZATION_MARKER = (
+    '# See:\n'
+    '#  - http://www.ros.org/wiki/rviz/DisplayTypes/Marker\n'
+    '#  - http://www.ros.org/wiki/rviz/Tutorials/Markers%3A%20Basic%20Shapes\n'
+    '#\n'
+    '# for more information on using this message with rviz.\n'
+    '\n'
+    'int32 ARROW=0\n'
+    'int32 CUBE=1\n'
+    'int32 SPHERE=2\n'
+    'int32 CYLINDER=3\n'
+    'int32 LINE_STRIP=4\n'
+    'int32 LINE_LIST=5\n'
+    'int32 CUBE_LIST=6\n'
+    'int32 SPHERE_LIST=7\n'
+    'int32 POINTS=8\n'
+    'int32 TEXT_VIEW_FACING=9\n'
+    'int32 MESH_RESOURCE=10\n'
+    'int32 TRIANGLE_LIST=11\n'
+    'int32 ARROW_STRIP=12\n'
+    '\n'
+    'int32 ADD=0\n'
+    'int32 MODIFY=0\n'
+    'int32 DELETE=2\n'
+    'int32 DELETEALL=3\n'
+    '\n'
+    '# Header for timestamp and frame id.\n'
+    'std_msgs/Header header\n'
+    '# Namespace in which to place the object.\n'
+    '# Used in conjunction with id to create a unique name for the object.\n'
+    'string ns\n'
+    '# Object ID used in conjunction with the namespace for manipulating and deleting'
+    ' the object later.\n'
+    'int32 id\n'
+    '# Type of object.\n'
+    'int32 type\n'
+    '# Action to take; one of:\n'
+    '#  - 0 add/modify an object\n'
+    '#  - 1 (deprecated)\n'
+    '#  - 2 deletes an object (with the given ns and id)\n'
+    '#  - 3 deletes all objects (or those with the given ns if any)\n'
+    'int32 action\n'
+    '# Pose of the object with respect the frame_id specified in the header.\n'
+    'geometry_msgs/Pose pose\n'
+    '# Scale of the object; 1,1,1 means default (usually 1 meter square).\n'
+    'geometry_msgs/Vector3 scale\n'
+    '# Color of the object; in the range: [0.0-1.0]\n'
+    'std_msgs/ColorRGBA color\n'
+    '# How long the object should last before being automatically deleted.\n'
+    '# 0 indicates forever.\n'
+    'builtin_interfaces/Duration lifetime\n'
+    '# If this marker should be frame-locked, i.e. retransformed into its frame every'
+    ' timestep.\n'
+    'bool frame_locked\n'
+    '\n'
+    '# Only used if the type specified has some use for them (eg. POINTS, LINE_STRIP,'
+    ' ARROW_STRIP, etc.)\n'
+    'geometry_msgs/Point[] points\n'
+    '# Only used if the type specified has some use for them (eg. POINTS, LINE_STRIP, etc.)\n'
+    '# The number of colors provided must either be 0 or equal to the number of point'
+    's provided.\n'
+    '# NOTE: alpha is not yet used\n'
+    'std_msgs/ColorRGBA[] colors\n'
+    '\n'
+    '# Texture resource is a special URI that can either reference a texture file in\n'
+    '# a format acceptable to (resource retriever)[https://docs.ros.org/en/rolling/p/'
+    'resource_retriever/]\n'
+    '# or an embedded texture via a string matching the format:\n'
+    '#   "embedded://texture_name"\n'
+    'string texture_resource\n'
+    '# An image to be loaded into the rendering engine as the texture for this marker.\n'
+    '# This will be used iff texture_resource is set to embedded.\n'
+    'sensor_msgs/CompressedImage texture\n'
+    '# Location of each vertex within the texture; in the range: [0.0-1.0]\n'
+    'UVCoordinate[] uv_coordinates\n'
+    '\n'
+    '# Only used for text markers\n'
+    'string text\n'
+    '\n'
+    '# Only used for MESH_RESOURCE markers.\n'
+    '# Similar to texture_resource, mesh_resource uses resource retriever to load a mesh.\n'
+    '# Optionally, a mesh file can be sent in-message via the mesh_file field. If doing so,\n'
+    '# use the following format for mesh_resource:\n'
+    '#   "embedded://mesh_name"\n'
+    'string mesh_resource\n'
+    'MeshFile mesh_file\n'
+    'bool mesh_use_embedded_materials\n'
+)
+
+_VISUALIZATION_MESHFILE = (
+    '# Used to send raw mesh files.\n'
+    '\n'
+    '# The filename is used for both debug purposes and to provide a file extension\n'
+    '# for whatever parser is used.\n'
+    'string filename\n'
+    '\n'
+    '# This stores the raw text of the mesh file.\n'
+    'uint8[] data\n'
+)
+
+_VISUALIZATION_UVCOORDINATE = (
+    '# Location of the pixel as a ratio of the width of a 2D texture.\n'
+    '# Values should be in range: [0.0-1.0].\n'
+    'float32 u\n'
+    'float32 v\n'
+)
+
+_SENSOR_COMPRESSEDIMAGE = (
+    '# This message contains a compressed image.\n'
+    '\n'
+    'std_msgs/Header header # Header timestamp should be acquisition time of image\n'
+    '                             # Header frame_id should be optical frame of camera\n'
+    '                             # origin of frame should be optical center of cameara\n'
+    '                             # +x should point to the right in the image\n'
+    '                             # +y should point down in the image\n'
+    '                             # +z should point into to plane of the image\n'
+    '\n'
+    'string format                # Specifies the format of the data\n'
+    '                             # Acceptable values differ by the image transport used:\n'
+    '                             # - compressed_image_transport:\n'
+    '                             #     ORIG_PIXFMT; CODEC compressed [COMPRESSED_PIXFMT]\n'
+    '                             #   where:\n'
+    '                             #   - ORIG_PIXFMT is pixel format of the raw image, i.e.\n'
+    '                             #     the content of sensor_msgs/Image/encoding with\n'
+    '                             #     values from include/sensor_msgs/image_encodings.h\n'
+    '                             #   - CODEC is one of [jpeg, png, tiff]\n'
+    '                             #   - COMPRESSED_PIXFMT is only appended for color images\n'
+    '                             #     and is the pixel format used by the compression\n'
+    '                             #     algorithm. Valid values for jpeg encoding are:\n'
+    '                             #     [bgr8, rgb8]. Valid values for png encoding are:\n'
+    '                             #     [bgr8, rgb8, bgr16, rgb16].\n'
+    '                             #   If the field is empty or does not correspond to the\n'
+    '                             #   above pattern, the image is treated as bgr8 or mono8\n'
+    '                             #   jpeg image (depending on the number of channels).\n'
+    '                             # - compressed_depth_image_transport:\n'
+    '                             #     ORIG_PIXFMT; compressedDepth CODEC\n'
+    '                             #   where:\n'
+    '                             #   - ORIG_PIXFMT is pixel format of the raw image, i.e.\n'
+    '                             #     the content of sensor_msgs/Image/encoding with\n'
+    '                             #     values from include/sensor_msgs/image_encodings.h\n'
+    '                             #     It is usually one of [16UC1, 32FC1].\n'
+    '                             #   - CODEC is one of [png, rvl]\n'
+    '                             #   If the field is empty or does not correspond to the\n'
+    '                             #   above pattern, the image is treated as png image.\n'
+    '                             # - Other image transports can store whatever values they\n'
+    '                             #   need for successful decoding of the image. Refer to\n'
+    '                             #   documentation of the other transports for details.\n'
+    '\n'
+    'uint8[] data                 # Compressed image buffer\n'
+)
+
+_STD_COLORRGBA = (
+    'float32 r\n'
+    'float32 g\n'
+    'float32 b\n'
+    'float32 a\n'
+)
+
+_GEOMETRY_POINT = (
+    '# This contains the position of a point in free space\n'
+    'float64 x\n'
+    'float64 y\n'
+    'float64 z\n'
+)
+
+_BUILTIN_DURATION = (
+    '# Duration defines a period between two time points.\n'
+    '# Messages of this datatype are of ROS Time following this design:\n'
+    '# https://design.ros2.org/articles/clock_and_time.html\n'
+    '\n'
+    '# Seconds component, range is valid over any possible int32 value.\n'
+    'int32 sec\n'
+    '\n'
+    '# Nanoseconds component in the range of [0, 1e9).\n'
+    'uint32 nanosec\n'
+)
+
+_GEOMETRY_VECTOR3 = (
+    '# This represents a vector in free space.\n'
+    '\n'
+    '# This is semantically different than a point.\n'
+    '# A vector is always anchored at the origin.\n'
+    '# When a transform is applied to a vector, only the rotational component is applied.\n'
+    '\n'
+    'float64 x\n'
+    'float64 y\n'
+    'float64 z\n'
+)
+
+_GEOMETRY_POSE = (
+    '# A representation of pose in free space, composed of position and orientation.\n'
+    '\n'
+    'Point position\n'
+    'Quaternion orientation\n'
+)
+
+_GEOMETRY_QUATERNION = (
+    '# This represents an orientation in free space in quaternion form.\n'
+    '\n'
+    'float64 x 0\n'
+    'float64 y 0\n'
+    'float64 z 0\n'
+    'float64 w 1\n'
+)
+
+#: ``.msg`` texts of the types ``markers`` (visualization_msgs/MarkerArray) needs, as the
+#: Kilted message packages ship them (Marker with texture, UV coordinates and mesh file).
+_MARKER_TEXTS: Dict[str, str] = {
+    'visualization_msgs/msg/MarkerArray': _VISUALIZATION_MARKERARRAY,
+    'visualization_msgs/msg/Marker': _VISUALIZATION_MARKER,
+    'visualization_msgs/msg/MeshFile': _VISUALIZATION_MESHFILE,
+    'visualization_msgs/msg/UVCoordinate': _VISUALIZATION_UVCOORDINATE,
+    'sensor_msgs/msg/CompressedImage': _SENSOR_COMPRESSEDIMAGE,
+    'std_msgs/msg/ColorRGBA': _STD_COLORRGBA,
+    'geometry_msgs/msg/Point': _GEOMETRY_POINT,
+    'builtin_interfaces/msg/Duration': _BUILTIN_DURATION,
+    'geometry_msgs/msg/Vector3': _GEOMETRY_VECTOR3,
+    'geometry_msgs/msg/Pose': _GEOMETRY_POSE,
+    'geometry_msgs/msg/Quaternion': _GEOMETRY_QUATERNION,
+}
+
 #: ``.msg`` text of every known type, by full type name (``pkg/msg/Type``).
 MSG_TEXTS: Dict[str, str] = {
     'conveyor_twin_msgs/msg/PartStates': _PARTSTATES,
@@ -184,6 +409,7 @@ MSG_TEXTS: Dict[str, str] = {
     'diagnostic_msgs/msg/DiagnosticArray': _DIAGNOSTICARRAY,
     'diagnostic_msgs/msg/DiagnosticStatus': _DIAGNOSTICSTATUS,
     'diagnostic_msgs/msg/KeyValue': _KEYVALUE,
+    **_MARKER_TEXTS,
 }
 
 #: Type names of the interface package of the contract.
