@@ -14,6 +14,8 @@ VERBS = {
     'info': ('conveyor_twin.cli.info', 'summarize a recording (topics, counts, rates)'),
     'recover': ('conveyor_twin.cli.recover', 'rebuild a killed or damaged recording'),
     'plot': ('conveyor_twin.cli.plot', 'plot trajectories, density, barriers, belts'),
+    'resimulate': ('conveyor_twin.cli.resimulate',
+                   're-run a recording and compare every message bit for bit'),
 }
 
 

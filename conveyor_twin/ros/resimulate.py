@@ -1,0 +1,246 @@
+"""Re-run a recording's cell and compare every recorded message bit for bit.
+
+A recording of ``conveyor-twin run --record`` is self-contained: the cell description
+(attachment ``cell.yaml``), the seed, the step, the namespace and the markers rate (metadata
+``conveyor_twin``) and every accepted command with the step at which it took effect. This module
+rebuilds the composed twin from them in lockstep, schedules the commands at their steps, taps
+its publishers without publishing (:func:`conveyor_twin.ros.record_tap.tap`, so no DDS traffic)
+and steps it on demand while reading the recording in file order: the recorded message with
+sequence number ``s`` on a topic is compared with the ``s``-th message the re-run publishes on
+it (sequence numbers count every message offered, so decimation and queue drops only skip).
+
+``diagnostics`` are not compared: they carry wall-clock step times. Parts placed through the
+``spawn_parts`` service and ``reset`` calls are not recorded, so a recording that used them does
+not re-simulate.
+"""
+
+from collections import Counter, deque
+from dataclasses import dataclass, field
+import math
+from typing import Any, Deque, Dict, Optional, Tuple
+
+from conveyor_twin.cell import CellError, load_cell_text
+from conveyor_twin.coord.commands import CommandRejected
+from conveyor_twin.coord.timing import TimeMode
+from conveyor_twin.record import reader
+from conveyor_twin.record.errors import RecordingError
+from conveyor_twin.record.writer import ACCEPTED_ACTUATOR_COMMANDS, ACCEPTED_BELT_COMMANDS
+from conveyor_twin.wire import cdr
+from conveyor_twin.wire.schemas import SCHEMAS
+
+#: Topics never compared (by contract name): their content depends on the wall clock.
+NOT_COMPARED = ('diagnostics',)
+
+
+@dataclass
+class Difference:
+    """The first recorded message the re-run does not reproduce."""
+
+    topic: str
+    sequence: int
+    step: int
+    log_time: int
+    byte_offset: Optional[int]
+    field: str
+    recorded: str
+    resimulated: str
+
+    def __str__(self) -> str:
+        where = '' if self.byte_offset is None else f', byte offset {self.byte_offset}'
+        what = f': field {self.field}: recorded {self.recorded}, re-simulated ' \
+            f'{self.resimulated}' if self.field else f': {self.recorded}'
+        return (f'{self.topic} message #{self.sequence} (step {self.step}, log time '
+                f'{self.log_time} ns){where}{what}')
+
+
+@dataclass
+class ResimReport:
+    """What a re-simulation compared and the first difference, if any."""
+
+    path: str
+    steps: int = 0
+    commands: int = 0
+    compared: Dict[str, int] = field(default_factory=Counter)
+    skipped: Dict[str, int] = field(default_factory=Counter)
+    complete_source: bool = True
+    difference: Optional[Difference] = None
+
+    @property
+    def ok(self) -> bool:
+        """True if every compared message was identical."""
+        return self.difference is None
+
+    def as_dict(self) -> Dict[str, Any]:
+        """Return the report as plain data (JSON)."""
+        d = self.difference
+        return {'path': self.path, 'ok': self.ok, 'steps': self.steps,
+                'commands': self.commands, 'compared': dict(self.compared),
+                'compared_total': sum(self.compared.values()),
+                'not_compared': dict(self.skipped), 'complete_source': self.complete_source,
+                'difference': None if d is None else {**vars(d), 'text': str(d)}}
+
+
+def _meta(path: str) -> Dict[str, str]:
+    meta = reader.read_metadata(path).get('conveyor_twin')
+    if not meta:
+        raise RecordingError(f'{path}: no conveyor_twin metadata record: not a recording of '
+                             'conveyor-twin run --record, cannot re-simulate')
+    for key in ('seed', 'step_ns'):
+        if not meta.get(key, '').strip().lstrip('-').isdigit():
+            raise RecordingError(f'{path}: metadata conveyor_twin.{key} = '
+                                 f'{meta.get(key, "")!r}: expected an integer')
+    return meta
+
+
+def _field_difference(type_name: str, a: bytes, b: bytes) -> Tuple[str, str, str]:
+    """Return (field path, recorded value, re-simulated value) of the first differing field."""
+    try:
+        from mcap_ros2._dynamic import generate_dynamic
+        decode = generate_dynamic(type_name, SCHEMAS[type_name])[type_name]
+        x, y = decode(a), decode(b)
+    except Exception:  # noqa: BLE001 - an undecodable message: the byte offset must do
+        return '', '', ''
+    return _walk(x, y, '') or ('', '', '')
+
+
+def _walk(x: Any, y: Any, path: str) -> Optional[Tuple[str, str, str]]:
+    slots = getattr(x, '__slots__', None)
+    if slots is not None and type(x) is type(y):
+        for name in slots:
+            found = _walk(getattr(x, name), getattr(y, name), f'{path}.{name}' if path else name)
+            if found:
+                return found
+        return None
+    if isinstance(x, (list, tuple, bytes, bytearray)) and isinstance(y, (list, tuple, bytes,
+                                                                          bytearray)):
+        for i, (u, v) in enumerate(zip(x, y)):
+            found = _walk(u, v, f'{path}[{i}]')
+            if found:
+                return found
+        if len(x) != len(y):
+            return f'{path} (length)', str(len(x)), str(len(y))
+        return None
+    if hasattr(x, 'tolist') and hasattr(y, 'tolist'):
+        return _walk(x.tolist(), y.tolist(), path)
+    same = x == y or (isinstance(x, float) and isinstance(y, float) and math.isnan(x)
+                      and math.isnan(y) and repr(x) == repr(y))
+    return None if same else (path, repr(x), repr(y))
+
+
+def _first_byte(a: bytes, b: bytes) -> int:
+    for i, (u, v) in enumerate(zip(a, b)):
+        if u != v:
+            return i
+    return min(len(a), len(b))
+
+
+def resimulate(path: str, *, context: Any) -> ResimReport:
+    """Re-run the recording's cell with its seed and commands; compare every message.
+
+    :param path: a recording made by ``conveyor-twin run --record`` (closed or killed).
+    :param context: an initialised rclpy Context (nodes are created, nothing is published).
+    :return: the report; ``report.difference`` is the first mismatch.
+    :raises RecordingError: if the file is not readable or not self-contained (the message
+        names the file and what is missing or invalid).
+    """
+    from conveyor_twin.ros.compose import ComposedTwin
+    from conveyor_twin.ros.record_tap import tap
+
+    path = str(path)
+    meta = _meta(path)
+    seed, step_ns = int(meta['seed']), int(meta['step_ns'])
+    try:
+        cell_text = reader.read_attachment(path, 'cell.yaml').decode('utf-8')
+        cell = load_cell_text(cell_text, f'{path}:cell.yaml')
+    except (CellError, UnicodeDecodeError) as exc:
+        raise RecordingError(f'{path}: attachment cell.yaml is not a valid cell: {exc}') from None
+    try:
+        markers_rate = float(meta.get('markers_rate', '30.0'))
+    except ValueError:
+        raise RecordingError(f'{path}: metadata conveyor_twin.markers_rate = '
+                             f'{meta["markers_rate"]!r}: expected a number') from None
+    namespace = meta.get('namespace', '') or None
+    report = ResimReport(path, complete_source=reader.is_complete(path))
+    twin = ComposedTwin(cell, seed=seed, mode=TimeMode.LOCKSTEP, context=context,
+                        namespace=namespace, markers_rate=markers_rate)
+    try:
+        if twin.twin.dt_ns != step_ns:
+            raise RecordingError(f'{path}: metadata step_ns {step_ns} differs from the step of '
+                                 f'cell.yaml ({twin.twin.dt_ns} ns)')
+        _schedule(path, twin, step_ns, report)
+        _compare(path, twin, tap, step_ns, report)
+    finally:
+        twin.stop()
+    return report
+
+
+def _schedule(path: str, twin: Any, step_ns: int, report: ResimReport) -> None:
+    book = twin.twin.commands
+    for m in reader.read_messages(path, topics=[ACCEPTED_BELT_COMMANDS,
+                                                ACCEPTED_ACTUATOR_COMMANDS], linear=True):
+        try:
+            if m.topic == ACCEPTED_BELT_COMMANDS:
+                command = book.validate_belt(*cdr.decode_belt_command(m.data))
+            else:
+                command = book.validate_actuator(*cdr.decode_actuator_command(m.data))
+        except (CommandRejected, ValueError) as exc:
+            raise RecordingError(f'{path}: recorded command #{m.sequence} on {m.topic} '
+                                 f'(log time {m.log_time} ns) cannot be applied: {exc}') from None
+        if m.log_time % step_ns or m.log_time <= 0:
+            raise RecordingError(f'{path}: recorded command #{m.sequence} on {m.topic} has log '
+                                 f'time {m.log_time} ns, not a step time (step {step_ns} ns)')
+        book.schedule(m.log_time // step_ns, command)
+        report.commands += 1
+
+
+def _compare(path: str, twin: Any, tap: Any, step_ns: int, report: ResimReport) -> None:
+    produced: Dict[str, Deque[Tuple[int, bytes]]] = {}
+    counters: Counter = Counter()
+
+    def sink(topic: str, data: bytes) -> None:
+        counters[topic] += 1
+        produced.setdefault(topic, deque()).append((counters[topic], data))
+
+    specs = tap(twin, sink, forward=False)
+    namespace = twin.coordinator.get_namespace()
+    ignored = {t for t, s in specs.items() if s.name in NOT_COMPARED}
+    ignored |= {ACCEPTED_BELT_COMMANDS, ACCEPTED_ACTUATOR_COMMANDS}
+    core = twin.twin
+    # a closed file is read through its index (CRCs checked: damage is an error, never a
+    # silent skip); a killed one linearly, as recover() would
+    for m in reader.read_messages(path, linear=not report.complete_source):
+        if m.topic in ignored:
+            if m.topic not in (ACCEPTED_BELT_COMMANDS, ACCEPTED_ACTUATOR_COMMANDS):
+                report.skipped[m.topic] += 1
+            continue
+        step = m.log_time // step_ns
+        if m.topic not in specs:
+            raise RecordingError(f'{path}: topic {m.topic} is not published by the twin '
+                                 f'(namespace {namespace!r})')
+        queue = produced.setdefault(m.topic, deque())
+        limit = step + 2
+        while True:
+            while queue and queue[0][0] < m.sequence:
+                queue.popleft()
+            if queue or core.step_index > limit:
+                break
+            core.step(1)
+            report.steps = core.step_index
+            for other in produced.values():  # keep memory bounded on topics not recorded
+                while len(other) > 10000:
+                    other.popleft()
+        if not queue or queue[0][0] != m.sequence:
+            report.difference = Difference(
+                m.topic, m.sequence, step, m.log_time, None, '',
+                f'the re-run published no message #{m.sequence} on {m.topic} by step '
+                f'{core.step_index}', '')
+            return
+        _, data = queue.popleft()
+        if data != m.data:
+            name, recorded, resimulated = _field_difference(specs[m.topic].type_name, m.data,
+                                                            data)
+            report.difference = Difference(m.topic, m.sequence, step, m.log_time,
+                                           _first_byte(m.data, data), name, recorded,
+                                           resimulated)
+            return
+        report.compared[m.topic] += 1
