@@ -16,6 +16,8 @@ macro now) and the grid's ``solid`` mask (1: obstacle or engaged actuator).
 from numba import njit
 import numpy as np
 
+from conveyor_twin.micro.sources import place
+
 # Sub-samples per cell edge when the footprint disc is rasterised.
 DEPOSIT_SAMPLES = 8
 
@@ -168,3 +170,64 @@ def window_subtract(acc: np.ndarray, j: int, i: int, w: int, total: float,
     for jj in range(max(0, j - w), min(ny, j + w + 1)):
         for ii in range(max(0, i - w), min(nx, i + w + 1)):
             acc[jj, ii] *= keep
+
+
+@njit(cache=True)
+def release_windows(acc: np.ndarray, w: int, ox: float, oy: float, h: float, vel: np.ndarray,
+                    offsets: np.ndarray, d: float, nx_: float, ny_: float, back: bool,
+                    max_fail: int, cand: np.ndarray, rot: np.ndarray, part_type: int, counters, ids, ptype, P,
+                    pt, shp, shp_verts, act_state, act_verts, va, vb, out) -> np.ndarray:
+    """Release whole parts wherever a window of ``acc`` holds one; return (released, failed).
+
+    A part goes to ``(ox + (ci + 0.5) h, oy + (cj + 0.5) h)`` [m] (the window's mass centre
+    ``(cj, ci)`` in cells) with the velocity ``vel[round(cj), round(ci)]`` [m/s]; if it would
+    overlap, the ``offsets`` (along, out) in units of ``d`` [m] relative to the outward normal
+    ``(nx_, ny_)`` are tried (negative ``out`` only if ``back``). After ``max_fail`` refused
+    placements the rest waits. ``rot[0]`` rotates the first offset tried from one part to the
+    next (stride 7), so consecutive parts spread over the window. The remaining arguments are
+    those of
+    :func:`conveyor_twin.micro.sources.place`.
+    """
+    res = np.zeros(2, dtype=np.int64)
+    tx, ty = -ny_, nx_
+    start = 0
+    while res[1] < max_fail:
+        flat = window_candidate(acc, start, w, 1.0, cand)
+        if flat < 0:
+            break
+        j = int(cand[0])
+        i = int(cand[1])
+        total = cand[2]
+        cj = cand[3]
+        ci = cand[4]
+        x = ox + (ci + 0.5) * h
+        y = oy + (cj + 0.5) * h
+        vj = min(max(int(cj + 0.5), 0), vel.shape[0] - 1)
+        vi = min(max(int(ci + 0.5), 0), vel.shape[1] - 1)
+        vx = vel[vj, vi, 0]
+        vy = vel[vj, vi, 1]
+        ok = False
+        k = offsets.shape[0]
+        for o in range(k):
+            oi = (o + rot[0]) % k
+            along = offsets[oi, 0]
+            outw = offsets[oi, 1]
+            if outw < 0.0 and not back:
+                continue
+            if res[1] >= max_fail:
+                break
+            px = x + d * (along * tx + outw * nx_)
+            py = y + d * (along * ty + outw * ny_)
+            pid = place(part_type, px, py, 0.0, vx, vy, 0.0, counters, ids, ptype, P, pt, shp,
+                        shp_verts, act_state, act_verts, va, vb, out)
+            if pid != 0:
+                ok = True
+                break
+            res[1] += 1
+        rot[0] = (rot[0] + 7) % k
+        if ok:
+            window_subtract(acc, j, i, w, total, 1.0)
+            res[0] += 1
+            continue
+        start = flat + 1
+    return res

@@ -43,10 +43,11 @@ from conveyor_twin.micro.sim import MicroSim
 BALANCE_TOLERANCE = 1e-9
 # Environment switch that turns the per-step ledger check on (debug runs).
 CHECK_ENV = 'CONVEYOR_TWIN_CHECK_BALANCE'
-# Offsets (in part diameters) tried when a released part would overlap: along, then across.
-_OFFSETS = ((0.0, 0.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0), (1.0, 1.0),
-            (-1.0, 1.0), (1.0, -1.0), (-1.0, -1.0), (2.0, 0.0), (-2.0, 0.0), (0.0, 2.0),
-            (0.0, -2.0))
+# Most positions tried for one released part (a lattice of part diameters over one cell
+# around the window's mass centre, nearest first; the first one tried rotates).
+MAX_OFFSETS = 49
+# Overlapping placements tried per step before the remaining releases wait for the next step.
+MAX_FAILED_PLACEMENTS = 32
 # Clearance [m] between a released part and the face it crosses.
 _CLEARANCE = 1e-4
 
@@ -72,6 +73,8 @@ class _Region:
         self.face_acc = [np.zeros((g.ny, 1)), np.zeros((g.ny, 1)), np.zeros((1, g.nx)),
                          np.zeros((1, g.nx))]
         self.w = max(1, int(math.ceil(radius / g.h)))
+        self.offsets = _lattice(0.5 * g.h, 2.0 * radius + _CLEARANCE)
+        self.rot = np.zeros(1, dtype=np.int64)
         centres, normals = g.boundary_faces()
         self.face_centres, self.face_normals = centres, normals
         xc, yc = g.centres()
@@ -124,6 +127,7 @@ class ScaleCoupling:
         self.max_residual = 0.0
         self._mask = np.zeros(self.micro.state.capacity, dtype=np.bool_)
         self._cand = np.zeros(5)
+        self._tries = MAX_FAILED_PLACEMENTS
         self.barriers: List[MacroBarrier] = []
         for index, barrier in enumerate(cell.light_barriers):
             for region in self.regions:
@@ -151,6 +155,7 @@ class ScaleCoupling:
         self.macro_edges = []
         if not self.regions:
             return
+        self._tries = MAX_FAILED_PLACEMENTS
         for region in self.regions:
             self._capture(region)
             self._sinks(region)
@@ -218,67 +223,31 @@ class ScaleCoupling:
     def _release(self, region: _Region) -> None:
         g = region.sim.grid
         vc = region.sim.cell_velocity
-        for side, acc in enumerate(region.face_acc):
-            start = 0
-            a, b = region.sides[side]
-            while True:
-                flat = _ho.window_candidate(acc, start, region.w, 1.0, self._cand)
-                if flat < 0:
-                    break
-                j, i, total, cj, ci = self._cand
-                k = min(max(int(round(cj if side < 2 else ci)), 0), b - a - 1)
-                face = a + k
-                nx_, ny_ = region.face_normals[face]
-                if side < 2:
-                    px = region.face_centres[face][0]
-                    py = g.origin_y + (cj + 0.5) * g.h
-                else:
-                    px = g.origin_x + (ci + 0.5) * g.h
-                    py = region.face_centres[face][1]
-                px += nx_ * (self.radius + _CLEARANCE)
-                py += ny_ * (self.radius + _CLEARANCE)
-                bj, bi = _boundary_cell(side, k, g)
-                vx, vy = vc[bj, bi]
-                if self._place(px, py, vx, vy, (float(nx_), float(ny_)), False):
-                    _ho.window_subtract(acc, int(j), int(i), region.w, total, 1.0)
-                    continue
-                start = flat + 1
-        if region.tiles is None:
-            return
-        acc = region.acc
-        start = 0
-        while True:
-            flat = _ho.window_candidate(acc, start, region.w, 1.0, self._cand)
-            if flat < 0:
-                break
-            j, i, total, cj, ci = self._cand
-            px = g.origin_x + (ci + 0.5) * g.h
-            py = g.origin_y + (cj + 0.5) * g.h
-            vx, vy = vc[int(round(cj)), int(round(ci))]
-            if self._place(px, py, vx, vy, (1.0, 0.0), True):
-                _ho.window_subtract(acc, int(j), int(i), region.w, total, 1.0)
-                continue  # the same window may hold another part
-            start = flat + 1
+        off = self.radius + _CLEARANCE - 0.5 * g.h
+        x_end, y_end = g.origin_x + g.nx * g.h, g.origin_y + g.ny * g.h
+        sides = ((g.origin_x - off - g.h, g.origin_y, vc[:, :1], -1.0, 0.0),
+                 (x_end + off, g.origin_y, vc[:, -1:], 1.0, 0.0),
+                 (g.origin_x, g.origin_y - off - g.h, vc[:1], 0.0, -1.0),
+                 (g.origin_x, y_end + off, vc[-1:], 0.0, 1.0))
+        for acc, (ox, oy, vel, nx_, ny_) in zip(region.face_acc, sides):
+            if self._tries > 0 and acc.max() >= 1.0 / (2 * region.w + 1):
+                self._release_from(region, acc, ox, oy, vel, nx_, ny_, False)
+        if region.tiles is not None and self._tries > 0:
+            self._release_from(region, region.acc, g.origin_x, g.origin_y, vc, 1.0, 0.0, True)
 
-    def _place(self, x: float, y: float, vx: float, vy: float, normal: Tuple[float, float],
-               back: bool) -> bool:
-        """Place one macro-type part near ``(x, y)`` [m] without overlap; return success.
-
-        :param normal: outward direction; offsets against it are tried only if ``back``.
-        """
-        d = 2.0 * self.radius + _CLEARANCE
-        nx_, ny_ = normal
-        tx, ty = -ny_, nx_
-        for along, out in _OFFSETS:
-            if out < 0.0 and not back:
-                continue  # never back into the grid through a face
-            px = x + d * (along * tx + out * nx_)
-            py = y + d * (along * ty + out * ny_)
-            ids = self.micro.spawn(self.part_type, px, py, 0.0, vx, vy, 0.0, strict=False)
-            if ids[0] != 0:
-                self.released += 1
-                return True
-        return False
+    def _release_from(self, region: _Region, acc: np.ndarray, ox: float, oy: float,
+                      vel: np.ndarray, nx_: float, ny_: float, back: bool) -> None:
+        m = self.micro
+        s = m.state
+        w, h = region.w, region.sim.grid.h
+        res = _ho.release_windows(acc, w, ox, oy, h, vel, region.offsets, 2.0 * self.radius
+                                  + _CLEARANCE, nx_, ny_, back, self._tries, self._cand,
+                                  region.rot,
+                                  self.part_type, s.counters, s.ids, s.part_type, s.P, m.pt,
+                                  m.shapes, m.shape_verts, m.act_state, m.act_verts, m._va,
+                                  m._vb, m._out)
+        self.released += int(res[0])
+        self._tries -= int(res[1])
 
     def _switch(self, region: _Region, step: int) -> None:
         tiles = region.tiles
@@ -312,6 +281,7 @@ class ScaleCoupling:
                 self._apply_tiles(region)
                 self._capture(region)
                 self._accumulate_inactive(region)
+                self._tries = 1 << 30
                 self._release(region)
                 if self.check:
                     self.check_balance()
@@ -361,7 +331,7 @@ class ScaleCoupling:
         """Return the coupling's dynamic state (accumulators, masks, counters) as bytes."""
         parts = [np.array([self.left_macro, self.released, self.captured]).tobytes()]
         for r in self.regions:
-            parts += [r.active.tobytes(), r.acc.tobytes()] + [a.tobytes() for a in r.face_acc]
+            parts += [r.active.tobytes(), r.acc.tobytes(), r.rot.tobytes()] + [a.tobytes() for a in r.face_acc]
             if r.tiles is not None:
                 parts += [r.tiles.macro.tobytes(), r.tiles.last_switch.tobytes()]
         for b in self.barriers:
@@ -369,14 +339,13 @@ class ScaleCoupling:
         return b''.join(parts)
 
 
-def _boundary_cell(side: int, k: int, g) -> Tuple[int, int]:
-    if side == 0:
-        return k, 0
-    if side == 1:
-        return k, g.nx - 1
-    if side == 2:
-        return 0, k
-    return g.ny - 1, k
+def _lattice(half: float, d: float) -> np.ndarray:
+    """Return ``(k, 2)`` lattice offsets [diameters] within ``half`` [m], nearest first."""
+    n = max(1, int(half / d + 1e-9))
+    a = np.arange(-n, n + 1, dtype=np.float64)
+    pts = np.stack(np.meshgrid(a, a), axis=-1).reshape(-1, 2)
+    order = np.lexsort((pts[:, 1], pts[:, 0], np.hypot(pts[:, 0], pts[:, 1])))
+    return np.ascontiguousarray(pts[order][:MAX_OFFSETS])
 
 
 def _inside(barrier, sim: MacroSim) -> bool:

@@ -323,6 +323,19 @@ class MicroSim:
             raise SpawnOverlapError(msg)
         return ids
 
+    def place_one(self, part_type: int, x: float, y: float, yaw: float, vx: float, vy: float,
+                  wz: float) -> int:
+        """Place one part unless it overlaps anything or the capacity is full; return its id or 0.
+
+        The scalar fast path of :meth:`spawn` (``strict=False``) for the scale hand-over.
+        :param x: [m]. :param y: [m]. :param yaw: [rad]. :param vx: [m/s]. :param wz: [rad/s].
+        """
+        s = self.state
+        return int(place(int(part_type), float(x), float(y), _wrap(float(yaw)), float(vx),
+                         float(vy), float(wz), s.counters, s.ids, s.part_type, s.P, self.pt,
+                         self.shapes, self.shape_verts, self.act_state, self.act_verts,
+                         self._va, self._vb, self._out))
+
     def remove(self, ids: Optional[Sequence[int]] = None, *,
                mask: Optional[np.ndarray] = None) -> PartsView:
         """Remove parts by id or by a bool mask over the active parts; return copies of them.
