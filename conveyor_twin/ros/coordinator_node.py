@@ -80,11 +80,18 @@ class CoordinatorNode(Node):
         self._replies: Dict[int, tuple] = {}  # role -> (step, reply bytes) of the last reply
         self._step_replies: Dict[int, bytes] = {}
         self._done_cv = threading.Condition()
+        self._scales_ready = not self._remote_roles
+        self.coupling_node: Optional[Node] = None
         if self._remote_roles:
             self.coupling_pub = self.create_publisher(UInt8MultiArray, coupling.COUPLING_TOPIC,
                                                       COUPLING_QOS)
-            self.create_subscription(UInt8MultiArray, coupling.DONE_TOPIC, self._on_done,
-                                     COUPLING_QOS, raw=True)
+            # The replies are served by a node of their own, spun by its own executor thread
+            # (split.coordinator_main): a step/reset/spawn service callback of this node waits
+            # for them, so they cannot share this node's executor.
+            self.coupling_node = Node('_scale_coordinator_coupling', context=context,
+                                      namespace=namespace, start_parameter_services=False)
+            self._done_sub = self.coupling_node.create_subscription(
+                UInt8MultiArray, coupling.DONE_TOPIC, self._on_done, COUPLING_QOS, raw=True)
             twin.step_listeners.append(self._step_remote)
         twin.step_listeners.append(self._publish_step)
 
@@ -138,6 +145,8 @@ class CoordinatorNode(Node):
 
     def _send_and_wait(self, payload: bytes, step: int) -> Dict[int, bytes]:
         """Send a coupling payload and wait for every scale node's reply to it."""
+        if not self._scales_ready and not self.wait_for_scales(REMOTE_STEP_TIMEOUT):
+            raise TimeoutError('micro_simulator and macro_simulator are not connected')
         with self._done_cv:
             counts = dict(self._done)
         self.coupling_pub.publish(coupling.to_cdr(payload))
@@ -170,8 +179,10 @@ class CoordinatorNode(Node):
         deadline = time.monotonic() + timeout
         n = len(self._remote_roles)
         while time.monotonic() < deadline:
+            # matched both ways: our writer sees their readers, our reader sees their writers
             if (self.coupling_pub.get_subscription_count() >= n
-                    and self.count_publishers(coupling.DONE_TOPIC) >= n):
+                    and self._done_sub.get_publisher_count() >= n):
+                self._scales_ready = True
                 return True
             time.sleep(0.01)
         return False
@@ -299,3 +310,9 @@ def _same_interface(a, b) -> bool:
 def summary_json(node: CoordinatorNode) -> str:
     """Return :meth:`CoordinatorNode.summary` as one line of JSON."""
     return json.dumps(node.summary(), sort_keys=True)
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Run ``scale_coordinator`` as its own process (console script; split layout)."""
+    from conveyor_twin.ros.split import coordinator_main
+    return coordinator_main(argv)

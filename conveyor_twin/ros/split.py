@@ -49,9 +49,13 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
     holder['node'] = node
     executor = make_executor(context)
     executor.add_node(node)
+    coupling_executor = make_executor(context)
+    coupling_executor.add_node(node.coupling_node)
     spin_stop = threading.Event()
-    spinner = threading.Thread(target=spin_until, args=(executor, spin_stop), daemon=True)
-    spinner.start()
+    spinners = [threading.Thread(target=spin_until, args=(ex, spin_stop), daemon=True)
+                for ex in (executor, coupling_executor)]
+    for spinner in spinners:
+        spinner.start()
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -72,8 +76,11 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
             code = 1
     print(SUMMARY_PREFIX + json.dumps(node.summary(), sort_keys=True), flush=True)
     spin_stop.set()
-    spinner.join(5.0)
+    for spinner in spinners:
+        spinner.join(5.0)
     executor.shutdown(timeout_sec=5.0)
+    coupling_executor.shutdown(timeout_sec=5.0)
+    node.coupling_node.destroy_node()
     node.destroy_node()
     context.try_shutdown()
     return code
