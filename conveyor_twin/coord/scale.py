@@ -47,7 +47,7 @@ CHECK_ENV = 'CONVEYOR_TWIN_CHECK_BALANCE'
 # around the window's mass centre, nearest first; the first one tried rotates).
 MAX_OFFSETS = 49
 # Overlapping placements tried per step before the remaining releases wait for the next step.
-MAX_FAILED_PLACEMENTS = 32
+MAX_FAILED_PLACEMENTS = 64
 # Clearance [m] between a released part and the face it crosses.
 _CLEARANCE = 1e-4
 
@@ -233,7 +233,7 @@ class ScaleCoupling:
             if self._tries > 0 and acc.max() >= 1.0 / (2 * region.w + 1):
                 self._release_from(region, acc, ox, oy, vel, nx_, ny_, False)
         if region.tiles is not None and self._tries > 0:
-            self._release_from(region, region.acc, g.origin_x, g.origin_y, vc, 1.0, 0.0, True)
+            self._release_from(region, region.acc, g.origin_x, g.origin_y, vc, 1.0, 0.0, False)
 
     def _release_from(self, region: _Region, acc: np.ndarray, ox: float, oy: float,
                       vel: np.ndarray, nx_: float, ny_: float, back: bool) -> None:
