@@ -195,3 +195,50 @@ def test_macro_light_barrier_edges_follow_the_flux_across_the_beam() -> None:
     assert abs(count - 2 * math.floor(crossings)) <= 1 + 0.05 * count
     assert micro.barrier_edge_count()[1] > 0  # the micro barrier at 3.6 still counts
     assert np.all(np.diff(times) >= 0)
+
+
+def _stopper_run(policy: str) -> List[float]:
+    """Feed 2000 parts at 600/s against the closed stopper (x = 1.2), open it at 4 s; return
+    the parts upstream of the stopper (micro + macro + pending) every 0.5 s."""
+    d = yaml.safe_load(default_cell_text())
+    d['sources'][0]['rate'] = 600.0
+    d['sources'][0]['max_parts'] = 2000
+    d['zones'] = [{'name': 'in', 'policy': policy, 'region': [0.0, -0.25, 2.6, 0.25],
+                   'resolution': 0.02,
+                   'auto': {'tile': 0.1, 'to_macro_density': 4000.0, 'to_micro_density': 1500.0,
+                            'min_dwell': 0.2, 'sensor_margin': 0.05}},
+                  {'name': 'out', 'policy': 'micro', 'region': [2.6, -0.25, 6.0, 0.25]}]
+    cell = cell_from_mapping(d)
+    micro, macro = MicroStage(cell, 1), MacroStage(cell)
+    twin = Twin(cell, seed=1, stages=[micro, macro])
+    coupling = twin.stages[-1]
+    coupling.check = True
+    twin.commands.submit_actuator('stopper', 0.008)
+    queue = []
+    for k in range(14):
+        if k == 8:
+            twin.commands.submit_actuator('stopper', 0.0)
+        twin.step(500)
+        v = micro.sim.parts_view()
+        q = float((v.x < 1.2).sum())
+        if coupling.enabled:
+            q += macro.grids[0].region_parts((0.0, -0.25, 1.2, 0.25))
+            q += float(coupling.regions[0].acc[:, :60].sum())
+        queue.append(q)
+    if policy == 'auto':
+        assert coupling.regions[0].tiles.switches > 0
+    return queue
+
+
+def test_stopper_queue_grows_and_dissolves_at_both_scales() -> None:
+    # Prediction: while the stopper is closed every fed part stays upstream (the queue grows at
+    # the feed rate until the source stops at 2000 parts); once it opens the queue drains
+    # through the stopper at the belt speed and is gone within a few seconds.
+    micro_q = _stopper_run('micro')
+    multi_q = _stopper_run('auto')
+    for a, b in zip(micro_q[:8], multi_q[:8]):
+        assert b == pytest.approx(a, abs=0.05 * 2000)
+    assert micro_q[7] == 2000 and multi_q[7] == pytest.approx(2000, abs=1e-9)
+    # both are draining 0.5 s after opening and nearly gone 3 s after it
+    assert micro_q[8] < 0.8 * 2000 and multi_q[8] < 0.8 * 2000
+    assert micro_q[-1] < 0.05 * 2000 and multi_q[-1] < 0.05 * 2000
