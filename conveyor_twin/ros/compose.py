@@ -5,6 +5,7 @@ node publishes its own streams after every step. An executor thread serves comma
 services; the stepping thread (realtime/fast) is the coordinator core's :class:`Runner`.
 """
 
+import os
 import threading
 from typing import Dict, Optional
 
@@ -20,6 +21,7 @@ from conveyor_twin.coord.twin import Twin
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
 from conveyor_twin.ros.macro_node import MacroNode
 from conveyor_twin.ros.micro_node import MicroNode
+from conveyor_twin.ros.params import parameter_overrides
 
 
 def make_executor(context: Context):
@@ -61,13 +63,18 @@ class ComposedTwin:
         self.macro_stage = MacroStage(cell)
         self.twin = Twin(cell, seed=seed, stages=[self.micro_stage, self.macro_stage])
         self.runner = Runner(self.twin, mode, max_steps=max_steps, on_error=self._on_error)
+        overrides = parameter_overrides(
+            cell_file=cell.source_file if os.path.isfile(cell.source_file) else '', seed=seed,
+            mode=mode, markers_rate=markers_rate,
+            duration=max_steps * cell.settings.step if max_steps else 0.0)
         common = dict(context=context, namespace=namespace, markers_rate=markers_rate,
-                      step_s=cell.settings.step)
+                      step_s=cell.settings.step, parameter_overrides=overrides)
         self.micro_node = MicroNode(self.micro_stage, **common)
         self.macro_node = MacroNode(self.macro_stage, **common)
         self.coordinator = CoordinatorNode(self.twin, self.runner, context=context,
                                            namespace=namespace, spawn=self.micro_stage.spawn,
-                                           counters=self.counters)
+                                           counters=self.counters,
+                                           parameter_overrides=overrides)
         self.twin.step_listeners.append(lambda inp, _: self.micro_node.publish_step(inp))
         self.twin.step_listeners.append(lambda inp, _: self.macro_node.publish_step(inp))
         self.executor = make_executor(context)

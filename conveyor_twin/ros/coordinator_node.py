@@ -28,10 +28,10 @@ from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.coord.twin import Twin
 from conveyor_twin.ros import coupling
+from conveyor_twin.ros.params import declare_twin_parameters, DIAGNOSTICS_PERIOD_STEPS
 from conveyor_twin.ros.qos import CLOCK_QOS, COMMAND_QOS, COUPLING_QOS, SLOW_QOS, STREAM_QOS
 from conveyor_twin.wire import cdr
 
-DIAGNOSTICS_PERIOD_STEPS = 1000   # 1 Hz of sim time at 1 ms
 REMOTE_STEP_TIMEOUT = 10.0        # s a split scale node may take to report a step done
 LOG_THROTTLE = 1.0                # s between two logged rejections
 
@@ -56,6 +56,7 @@ class CoordinatorNode(Node):
                          parameter_overrides=parameter_overrides or [])
         self.twin = twin
         self.runner = runner
+        self.parameters = declare_twin_parameters(self, step_s=twin.cell.settings.step)
         self._spawn = spawn
         self._counters = counters or (lambda: {})
         self._last_log = 0.0

@@ -1,13 +1,16 @@
 """Node parameters shared by the three nodes, declared with descriptions and read once."""
 
 from dataclasses import dataclass
+from typing import List
 
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
 from conveyor_twin.coord.timing import TimeMode
 
 DEFAULT_MARKERS_RATE = 30.0  # Hz, viewer rate of `markers`
+DIAGNOSTICS_PERIOD_STEPS = 1000  # steps between two `diagnostics` (1 Hz of sim time at 1 ms)
 
 
 @dataclass(frozen=True)
@@ -28,11 +31,21 @@ class TwinParameters:
     duration: float
 
 
-def declare_twin_parameters(node: Node) -> TwinParameters:
-    """Declare the twin's parameters on ``node`` and return their values."""
-    def declare(name: str, default, description: str):
+def declare_twin_parameters(node: Node, *, step_s: float = 1e-3) -> TwinParameters:
+    """Declare the twin's parameters on ``node`` and return their values.
+
+    Every node of the twin (``scale_coordinator``, ``micro_simulator``, ``macro_simulator``)
+    declares them, so ``ros2 param list/describe/get`` show the run's knobs on each. They are
+    read once at start (read only); ``namespace``, ``stream_rate`` and ``diagnostics_rate``
+    only report (the namespace is set by ``--namespace`` or ``-r __ns:=...``, the rates follow
+    the cell's step).
+
+    :param step_s: the cell's step [s], for the reported rates.
+    """
+    def declare(name: str, default, description: str, **kwargs):
         return node.declare_parameter(
-            name, default, ParameterDescriptor(description=description)).value
+            name, default, ParameterDescriptor(description=description, read_only=True),
+            **kwargs).value
 
     cell_file = declare('cell_file', '', 'cell YAML file; empty: the embedded default cell')
     seed = declare('seed', -1, 'random seed of the run; negative: the seed in the cell file')
@@ -41,6 +54,14 @@ def declare_twin_parameters(node: Node) -> TwinParameters:
                            'rate of visualization markers on `markers` [Hz]; 0 disables them')
     duration = declare('duration', 0.0,
                        'stop after this much simulated time [s]; 0 runs until shutdown')
+    declare('namespace', node.get_namespace(),
+            'namespace of the twin\'s relative topics and services (set with --namespace or '
+            '-r __ns:=...)', ignore_override=True)
+    declare('stream_rate', 1.0 / step_s,
+            'rate of the every-step streams and /clock in sim time [Hz] (1 / cell step)',
+            ignore_override=True)
+    declare('diagnostics_rate', 1.0 / (DIAGNOSTICS_PERIOD_STEPS * step_s),
+            'rate of `diagnostics` in sim time [Hz]', ignore_override=True)
     try:
         time_mode = TimeMode(mode)
     except ValueError:
@@ -49,3 +70,12 @@ def declare_twin_parameters(node: Node) -> TwinParameters:
     if markers_rate < 0.0 or duration < 0.0:
         raise ValueError('parameters markers_rate and duration must not be negative')
     return TwinParameters(cell_file, int(seed), time_mode, float(markers_rate), float(duration))
+
+
+def parameter_overrides(*, cell_file: str, seed: int, mode: TimeMode, markers_rate: float,
+                        duration: float) -> List[Parameter]:
+    """Return the parameter values of a composed run, for the nodes built in this process."""
+    return [Parameter('cell_file', value=cell_file), Parameter('seed', value=int(seed)),
+            Parameter('mode', value=TimeMode(mode).value),
+            Parameter('markers_rate', value=float(markers_rate)),
+            Parameter('duration', value=float(duration))]

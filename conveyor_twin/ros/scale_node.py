@@ -9,6 +9,7 @@ from std_msgs.msg import UInt8MultiArray
 from conveyor_twin.cell import load_cell
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.ros import coupling
+from conveyor_twin.ros.params import declare_twin_parameters
 from conveyor_twin.ros.qos import COUPLING_QOS
 
 MICRO_ROLE = 1
@@ -47,6 +48,7 @@ class ScaleNode(Node):
                          parameter_overrides=parameter_overrides or [])
         self.stage = stage
         self.role = role
+        self.parameters = declare_twin_parameters(self, step_s=step_s)
         self.markers_every = (max(1, round(1.0 / (markers_rate * step_s)))
                               if markers_rate > 0 else 0)
         if remote:

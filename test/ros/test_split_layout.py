@@ -15,7 +15,8 @@ from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.ros.compose import ComposedTwin
 from conveyor_twin.ros.split import _ros_args
 from conveyor_twin.wire import cdr
-from test.ros.twin_driver import Driver, TIMEOUT
+from test.ros.test_node_parameters import check_parameters as check_node_parameters, NODES
+from test.ros.twin_driver import Driver
 
 pytestmark = pytest.mark.ros
 SEED = 7
@@ -70,12 +71,16 @@ def run_composed(context, name: str):
         twin.stop()
 
 
-def run_split(context, ros_processes, tmp_path, tag: str):
+def run_split(context, ros_processes, tmp_path, tag: str, check_parameters: bool = False):
     start_split(ros_processes, tmp_path, tag)
     driver = Driver(context, density_per_step=_density_per_step(load_cell()), name='probe_' + tag)
     try:
         assert driver.wait_connected(), 'split twin not discovered\n' + _logs(tmp_path)
         driver.run(SEQUENCE)
+        if check_parameters:  # each process's real node declares the parameters
+            for node in NODES:
+                check_node_parameters(driver, node, seed=SEED, mode='lockstep',
+                                      markers_rate=0.0)
         return driver.digests(), driver.counts(), driver
     finally:
         driver.close()
@@ -104,7 +109,8 @@ def test_split_streams_are_consecutive_and_identical_to_composed_and_reruns(
     rerun, _, _ = run_composed(ros_context, 'probe_c2')
     assert rerun == composed
 
-    split, split_counts, split_driver = run_split(ros_context, ros_processes, tmp_path, 's1')
+    split, split_counts, split_driver = run_split(ros_context, ros_processes, tmp_path, 's1',
+                                                        check_parameters=True)
     _assert_consecutive(split_driver)
     # /clock is best effort, keep-last 1 (the ROS convention): it may drop, so it is not hashed
     split_counts.pop('/clock')

@@ -115,6 +115,28 @@ class Driver:
         """SHA-256 of every hashed stream (everything but the best-effort /clock)."""
         return {t: self.probe.digest(t) for t in HASHED}
 
+    def parameters(self, node_name: str) -> Dict[str, tuple]:
+        """List, describe and get a node's parameters through its parameter services (as
+        ``ros2 param dump``/``describe`` do); return ``{name: (value, description, read_only)}``.
+        """
+        from rclpy.parameter import parameter_value_to_python
+        from rclpy.parameter_client import AsyncParameterClient
+
+        client = AsyncParameterClient(self.probe, node_name)
+        assert wait_for(client.services_are_ready, TIMEOUT, self.executor), node_name
+
+        def result(future):
+            self.executor.spin_until_future_complete(future, timeout_sec=TIMEOUT)
+            assert future.done(), f'parameter service of {node_name} timed out'
+            return future.result()
+
+        names = list(result(client.list_parameters()).result.names)
+        names = [n for n in names if n != 'use_sim_time']
+        values = result(client.get_parameters(names)).values
+        descriptors = result(client.describe_parameters(names)).descriptors
+        return {n: (parameter_value_to_python(v), d.description, d.read_only)
+                for n, v, d in zip(names, values, descriptors)}
+
     def close(self) -> None:
         """Destroy the probe and the executor."""
         self.executor.remove_node(self.probe)
