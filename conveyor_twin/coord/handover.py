@@ -99,7 +99,7 @@ def deposit_disc(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: flo
 
 @njit(cache=True)
 def take_inactive(rho: np.ndarray, active: np.ndarray, h: float, acc: np.ndarray) -> float:
-    """Move the mass of inactive cells into ``acc`` [parts] (per cell); return the total [parts]."""
+    """Move the mass of inactive cells into ``acc`` (per cell); return the total [parts]."""
     ny, nx = rho.shape
     hh = h * h
     total = 0.0
@@ -175,7 +175,8 @@ def window_subtract(acc: np.ndarray, j: int, i: int, w: int, total: float,
 @njit(cache=True)
 def release_windows(acc: np.ndarray, w: int, ox: float, oy: float, h: float, vel: np.ndarray,
                     offsets: np.ndarray, d: float, nx_: float, ny_: float, back: bool,
-                    max_fail: int, cand: np.ndarray, rot: np.ndarray, part_type: int, counters, ids, ptype, P,
+                    max_fail: int, cand: np.ndarray, rot: np.ndarray, part_type: int,
+                    counters, ids, ptype, P,
                     pt, shp, shp_verts, act_state, act_verts, va, vb, out) -> np.ndarray:
     """Release whole parts wherever a window of ``acc`` holds one; return (released, failed).
 

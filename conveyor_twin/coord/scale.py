@@ -331,7 +331,8 @@ class ScaleCoupling:
         """Return the coupling's dynamic state (accumulators, masks, counters) as bytes."""
         parts = [np.array([self.left_macro, self.released, self.captured]).tobytes()]
         for r in self.regions:
-            parts += [r.active.tobytes(), r.acc.tobytes(), r.rot.tobytes()] + [a.tobytes() for a in r.face_acc]
+            parts += [r.active.tobytes(), r.acc.tobytes(), r.rot.tobytes()]
+            parts += [a.tobytes() for a in r.face_acc]
             if r.tiles is not None:
                 parts += [r.tiles.macro.tobytes(), r.tiles.last_switch.tobytes()]
         for b in self.barriers:
