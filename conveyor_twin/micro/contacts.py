@@ -200,7 +200,18 @@ CT_V_T = 10
 CT_BVX = 11
 CT_BVY = 12
 CT_BW = 13
-CT_COLUMNS = 14
+# written by the solvers before their sweeps (off the sweeps' dependency chain)
+CT_IKN = 14           # 1 / normal effective mass [1/kg]
+CT_IKT = 15           # 1 / tangential effective mass [1/kg]
+CT_IKN_S = 16         # the same in the shock sweep (the downstream body fixed)
+CT_IKT_S = 17
+CT_SLOPE = 18         # (mu_k - mu_s) / v_t [s/m]
+CT_WA = 19            # position correction: share of a (fraction included) [-]
+CT_WB = 20
+CT_CNT = 21           # change of the tangential speed per unit normal impulse [1/kg]
+CT_CNT_S = 22         # the same in the shock sweep
+CT_FA_S = 23          # shock sweep: 1.0 if a moves (b counts as fixed), 0.0 if b moves
+CT_COLUMNS = 24
 
 
 @njit(cache=True, inline='always')
@@ -443,6 +454,19 @@ def detect(n, ptype, x, y, yaw, pt, gdim, cell_start, cell_items, part_cell, sta
     return nc
 
 
+@njit(cache=True, inline='always')
+def _effective(ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny):
+    """Return a contact's inverse normal and tangential effective masses [1/kg] and the change
+    of its tangential speed per unit normal impulse [1/kg]."""
+    rna = rax * ny - ray * nx
+    rnb = rbx * ny - rby * nx
+    rta = rax * nx + ray * ny
+    rtb = rbx * nx + rby * ny
+    kn = ima + imb + iia * rna * rna + iib * rnb * rnb
+    kt = ima + imb + iia * rta * rta + iib * rtb * rtb
+    return 1.0 / kn, 1.0 / kt, iia * rna * rta + iib * rnb * rtb
+
+
 @njit(cache=True)
 def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc):
     """Apply the contacts' impulses in ``passes`` sweeps (canonical order).
@@ -452,40 +476,116 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc):
     ``passes >= 2`` the last sweep is a shock-propagation sweep: of two parts the one further
     downstream (larger ``key``, its position along its belt's direction [m]) counts as fixed,
     so a pile pressed by the belt against an obstacle is stopped in one sweep.
+
+    The sweeps are Gauss-Seidel: each contact sees the velocities left by the ones before it,
+    so the per-contact work is a dependency chain. The effective masses (geometry only) are
+    inverted for all contacts first, where the divisions overlap; the sweeps only multiply.
+    Each impulse is that of :func:`impulse_response`.
     """
     track = mp[MP_TRACK] != 0.0
+    shocking = passes >= 2
+    for c in range(nc):
+        a = cidx[c, 0]
+        b = cidx[c, 1]
+        ta = ptype[a]
+        ima = pt[ta, PT_INV_MASS]
+        iia = pt[ta, PT_INV_INERTIA]
+        imb = 0.0
+        iib = 0.0
+        if b >= 0:
+            tb = ptype[b]
+            imb = pt[tb, PT_INV_MASS]
+            iib = pt[tb, PT_INV_INERTIA]
+        rax = ct[c, CT_RAX]
+        ray = ct[c, CT_RAY]
+        rbx = ct[c, CT_RBX]
+        rby = ct[c, CT_RBY]
+        nx = ct[c, CT_NX]
+        ny = ct[c, CT_NY]
+        ct[c, CT_IKN], ct[c, CT_IKT], ct[c, CT_CNT] = _effective(
+            ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny)
+        ct[c, CT_FA_S] = 1.0
+        if shocking and b >= 0:
+            if key[a] > key[b]:
+                ct[c, CT_FA_S] = 0.0
+                ct[c, CT_IKN_S], ct[c, CT_IKT_S], ct[c, CT_CNT_S] = _effective(
+                    0.0, 0.0, imb, iib, rax, ray, rbx, rby, nx, ny)
+            else:
+                ct[c, CT_IKN_S], ct[c, CT_IKT_S], ct[c, CT_CNT_S] = _effective(
+                    ima, iia, 0.0, 0.0, rax, ray, rbx, rby, nx, ny)
+        else:
+            ct[c, CT_IKN_S] = ct[c, CT_IKN]
+            ct[c, CT_IKT_S] = ct[c, CT_IKT]
+            ct[c, CT_CNT_S] = ct[c, CT_CNT]
+        v_t = ct[c, CT_V_T]
+        ct[c, CT_SLOPE] = (ct[c, CT_MU_K] - ct[c, CT_MU_S]) / v_t if v_t > 0.0 else 0.0
     for it in range(passes):
-        shock = passes >= 2 and it == passes - 1
+        shock = shocking and it == passes - 1
+        ikn_col = CT_IKN_S if shock else CT_IKN
+        ikt_col = CT_IKT_S if shock else CT_IKT
+        cnt_col = CT_CNT_S if shock else CT_CNT
+        first = it == 0
+        # branch-free per contact (the outcome of closing/separating, sticking/sliding is
+        # data-dependent and would mispredict): a separating contact gets jn = 0, hence jt = 0
         for c in range(nc):
             a = cidx[c, 0]
             b = cidx[c, 1]
+            fa = 1.0
+            fb = 1.0
+            if shock:
+                fa = ct[c, CT_FA_S]
+                fb = 1.0 - fa
             ta = ptype[a]
-            ima = pt[ta, PT_INV_MASS]
-            iia = pt[ta, PT_INV_INERTIA]
-            e = ct[c, CT_E] if it == 0 else 0.0
+            ima = pt[ta, PT_INV_MASS] * fa
+            iia = pt[ta, PT_INV_INERTIA] * fa
             if b >= 0:
                 tb = ptype[b]
-                imb = pt[tb, PT_INV_MASS]
-                iib = pt[tb, PT_INV_INERTIA]
-                if shock:
-                    if key[a] > key[b]:
-                        ima = 0.0
-                        iia = 0.0
-                    else:
-                        imb = 0.0
-                        iib = 0.0
-                (vx[a], vy[a], wz[a], vx[b], vy[b], wz[b], jn, jt, ut) = impulse_response(
-                    vx[a], vy[a], wz[a], ima, iia, ct[c, CT_RAX], ct[c, CT_RAY],
-                    vx[b], vy[b], wz[b], imb, iib,
-                    ct[c, CT_RBX], ct[c, CT_RBY], ct[c, CT_NX], ct[c, CT_NY], e,
-                    ct[c, CT_MU_S], ct[c, CT_MU_K], ct[c, CT_V_T])
+                imb = pt[tb, PT_INV_MASS] * fb
+                iib = pt[tb, PT_INV_INERTIA] * fb
+                vbx = vx[b]
+                vby = vy[b]
+                wb = wz[b]
             else:
-                (vx[a], vy[a], wz[a], _, _, _, jn, jt, ut) = impulse_response(
-                    vx[a], vy[a], wz[a], ima, iia, ct[c, CT_RAX], ct[c, CT_RAY],
-                    ct[c, CT_BVX], ct[c, CT_BVY], ct[c, CT_BW], 0.0, 0.0,
-                    ct[c, CT_RBX], ct[c, CT_RBY], ct[c, CT_NX], ct[c, CT_NY], e,
-                    ct[c, CT_MU_S], ct[c, CT_MU_K], ct[c, CT_V_T])
-            if track and jt != 0.0:
+                imb = 0.0
+                iib = 0.0
+                vbx = ct[c, CT_BVX]
+                vby = ct[c, CT_BVY]
+                wb = ct[c, CT_BW]
+            vax = vx[a]
+            vay = vy[a]
+            wa = wz[a]
+            rax = ct[c, CT_RAX]
+            ray = ct[c, CT_RAY]
+            rbx = ct[c, CT_RBX]
+            rby = ct[c, CT_RBY]
+            nx = ct[c, CT_NX]
+            ny = ct[c, CT_NY]
+            # normal and tangential relative speeds from the same velocities; the tangential
+            # speed after the normal impulse follows algebraically (CT_CNT), which keeps the
+            # chain from one contact to the next short
+            ux = (vax - wa * ray) - (vbx - wb * rby)
+            uy = (vay + wa * rax) - (vby + wb * rbx)
+            un = ux * nx + uy * ny
+            ee = ct[c, CT_E] if first and -un > RESTITUTION_THRESHOLD else 0.0
+            jn = max(-(1.0 + ee) * un * ct[c, ikn_col], 0.0)
+            ut = (uy * nx - ux * ny) + jn * ct[c, cnt_col]
+            jt = -ut * ct[c, ikt_col]
+            speed = abs(ut)
+            mu = (ct[c, CT_MU_S] + ct[c, CT_SLOPE] * speed if speed < ct[c, CT_V_T]
+                  else ct[c, CT_MU_K])
+            limit = mu * jn
+            jt = min(max(jt, -limit), limit)
+            # total impulse along x, y (t = (-ny, nx)) and its moments
+            px = jn * nx - jt * ny
+            py = jn * ny + jt * nx
+            vx[a] = vax + px * ima
+            vy[a] = vay + py * ima
+            wz[a] = wa + iia * (rax * py - ray * px)
+            if b >= 0:
+                vx[b] = vbx - px * imb
+                vy[b] = vby - py * imb
+                wz[b] = wb - iib * (rbx * py - rby * px)
+            if track:
                 acc[A_CONTACT_FRICTION] += abs(jt * ut)
 
 
@@ -497,36 +597,43 @@ def correct_positions(nc, ct, cidx, ptype, x, y, x0, y0, pt, passes, key, mp):
     moved since (``x0``, ``y0``: positions at detection); each sweep removes
     ``mp[MP_CORRECTION]`` of the excess over the slop, in inverse-mass proportion; the last of
     ``passes >= 2`` sweeps moves only the upstream part of a pair (see :func:`solve_impulses`).
+    The shares are computed for all contacts before the sweeps (no division in the chain).
     """
     slop = mp[MP_SLOP]
     frac = mp[MP_CORRECTION]
+    shocking = passes >= 2
+    for c in range(nc):
+        a = cidx[c, 0]
+        b = cidx[c, 1]
+        ima = pt[ptype[a], PT_INV_MASS]
+        imb = pt[ptype[b], PT_INV_MASS] if b >= 0 else 0.0
+        w = frac / (ima + imb)
+        ct[c, CT_WA] = w * ima
+        ct[c, CT_WB] = w * imb
+        ct[c, CT_FA_S] = 0.0 if shocking and b >= 0 and key[a] > key[b] else 1.0
     for it in range(passes):
-        shock = passes >= 2 and it == passes - 1
+        shock = shocking and it == passes - 1
+        # branch-free per contact, as in solve_impulses (no excess: a zero move)
         for c in range(nc):
             a = cidx[c, 0]
             b = cidx[c, 1]
             nx = ct[c, CT_NX]
             ny = ct[c, CT_NY]
-            ima = pt[ptype[a], PT_INV_MASS]
             moved = nx * (x[a] - x0[a]) + ny * (y[a] - y0[a])
-            imb = 0.0
+            if shock:
+                wa = frac * ct[c, CT_FA_S]
+                wb = frac - wa
+            else:
+                wa = ct[c, CT_WA]
+                wb = ct[c, CT_WB]
             if b >= 0:
-                imb = pt[ptype[b], PT_INV_MASS]
                 moved -= nx * (x[b] - x0[b]) + ny * (y[b] - y0[b])
-                if shock:
-                    if key[a] > key[b]:
-                        ima = 0.0
-                    else:
-                        imb = 0.0
-            excess = ct[c, CT_DEPTH] - moved - slop
-            if excess <= 0.0:
-                continue
-            d = frac * excess / (ima + imb)
-            x[a] += nx * d * ima
-            y[a] += ny * d * ima
+            excess = max(ct[c, CT_DEPTH] - moved - slop, 0.0)
+            x[a] += nx * excess * wa
+            y[a] += ny * excess * wa
             if b >= 0:
-                x[b] -= nx * d * imb
-                y[b] -= ny * d * imb
+                x[b] -= nx * excess * wb
+                y[b] -= ny * excess * wb
 
 
 @njit(cache=True)
