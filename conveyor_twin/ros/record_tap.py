@@ -3,7 +3,8 @@
 The composed twin's nodes publish CDR bytes built straight from numpy. :func:`tap` puts a thin
 proxy in front of each of their publishers that hands those very bytes to a sink before
 publishing them (diagnostics, published as a message object, are serialized once and the bytes
-published), so what is recorded is byte for byte what subscribers receive, every step, with
+published; a node's shortcut to the publisher's ``handle.publish_raw`` is routed through the
+proxy too), so what is recorded is byte for byte what subscribers receive, every step, with
 nothing lost to transport. :class:`TwinRecording` feeds them to a
 :class:`~conveyor_twin.record.writer.McapRecorder` (which only appends to a bounded queue: the
 step never blocks on disk; a full queue drops messages and counts them per topic) and adds,
@@ -61,8 +62,26 @@ class TapPublisher:
         if self.forward:
             self.publisher.publish(data)
 
+    def publish_raw(self, data: bytes) -> None:
+        """Hand CDR bytes to the sink, then publish them without rclpy's wrapper."""
+        self.sink(self.topic, data)
+        if self.forward:
+            self.publisher.handle.publish_raw(data)
+
     def __getattr__(self, name: str) -> Any:
         return getattr(self.publisher, name)
+
+
+def _replace_raw_publishers(node: Any, publisher: Any, proxy: TapPublisher) -> None:
+    """Route a node's shortcuts to ``publisher.handle.publish_raw`` (``ros.qos.raw_publish``)
+    through the proxy, whatever the node calls them."""
+    handle = getattr(publisher, 'handle', None)
+    if handle is None:
+        return
+    for name, value in list(vars(node).items()):
+        if getattr(value, '__self__', None) is handle and \
+                getattr(value, '__name__', '') == 'publish_raw':
+            setattr(node, name, proxy.publish_raw)
 
 
 def tap(composed: Any, sink: Sink, *, forward: bool = True) -> Dict[str, contract.TopicSpec]:
@@ -87,6 +106,7 @@ def tap(composed: Any, sink: Sink, *, forward: bool = True) -> Dict[str, contrac
         spec = contract.spec_of(proxy.topic, namespace)
         if spec is None:
             raise RuntimeError(f'{proxy.topic} is not a contract topic')
+        _replace_raw_publishers(node, publisher, proxy)
         setattr(node, attribute, proxy)
         tapped[proxy.topic] = spec
     return tapped
