@@ -5,12 +5,17 @@ Every step's duration (the twin's step and everything its listeners do, e.g. pub
 recorded in :attr:`Runner.stats`; in realtime a step that ends after its deadline is an overrun.
 """
 
+import sys
 import threading
 import time
 from typing import Callable, Optional
 
 from conveyor_twin.coord.timing import DeadlinePacer, StepStats, TimeMode
 from conveyor_twin.coord.twin import Twin
+
+# GIL switch interval while a realtime loop runs [s]: Python's 5 ms default lets another thread
+# (the ROS executor serving a service or a command) hold the GIL for up to 5 steps.
+REALTIME_SWITCH_INTERVAL = 2e-4
 
 
 class Runner:
@@ -62,6 +67,9 @@ class Runner:
 
     def _loop(self) -> None:
         realtime = self.mode is TimeMode.REALTIME
+        switch_interval = sys.getswitchinterval()
+        if realtime:
+            sys.setswitchinterval(REALTIME_SWITCH_INTERVAL)
         self.pacer.restart()
         try:
             while not self._stop.is_set():
@@ -76,6 +84,7 @@ class Runner:
                 self._on_error(exc)
         finally:
             self.wall_end = time.monotonic()
+            sys.setswitchinterval(switch_interval)
             self._stop.set()
 
     @property

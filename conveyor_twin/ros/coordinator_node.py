@@ -29,7 +29,8 @@ from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.coord.twin import Twin
 from conveyor_twin.ros import coupling
 from conveyor_twin.ros.params import declare_twin_parameters, DIAGNOSTICS_PERIOD_STEPS
-from conveyor_twin.ros.qos import CLOCK_QOS, COMMAND_QOS, COUPLING_QOS, SLOW_QOS, STREAM_QOS
+from conveyor_twin.ros.qos import (CLOCK_QOS, COMMAND_QOS, COUPLING_QOS, raw_publish,
+                                   SLOW_QOS, STREAM_QOS)
 from conveyor_twin.wire import cdr
 
 REMOTE_STEP_TIMEOUT = 10.0        # s a split scale node may take to report a step done
@@ -69,6 +70,9 @@ class CoordinatorNode(Node):
         self.belt_pub = self.create_publisher(BeltStates, 'belt_states', STREAM_QOS)
         self.actuator_pub = self.create_publisher(ActuatorStates, 'actuator_states', STREAM_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', SLOW_QOS)
+        self._pub_clock = raw_publish(self.clock_pub)
+        self._pub_belts = raw_publish(self.belt_pub)
+        self._pub_actuators = raw_publish(self.actuator_pub)
         self.create_subscription(BeltCommand, 'belt_command', self._on_belt_command,
                                  COMMAND_QOS)
         self.create_subscription(ActuatorCommand, 'actuator_command',
@@ -99,10 +103,10 @@ class CoordinatorNode(Node):
     # -- per step ------------------------------------------------------------------------
     def _publish_step(self, inp: StepInput, commands: List[Command]) -> None:
         twin = self.twin
-        self.clock_pub.publish(cdr.encode_clock(inp.time_ns))
-        self.belt_pub.publish(self._belt_states.encode(
+        self._pub_clock(cdr.encode_clock(inp.time_ns))
+        self._pub_belts(self._belt_states.encode(
             inp.time_ns, twin.actuation.belt_target, inp.belt_speed))
-        self.actuator_pub.publish(self._actuator_states.encode(
+        self._pub_actuators(self._actuator_states.encode(
             inp.time_ns, twin.actuation.actuator_target, inp.actuator_position))
         if inp.step % DIAGNOSTICS_PERIOD_STEPS == 0:
             self.diag_pub.publish(self.diagnostics(inp.time_ns))

@@ -7,7 +7,7 @@ from conveyor_twin_msgs.msg import DensityGrid
 
 from conveyor_twin.coord.stages import MacroStage
 from conveyor_twin.coord.step_input import StepInput
-from conveyor_twin.ros.qos import STREAM_QOS
+from conveyor_twin.ros.qos import raw_publish, STREAM_QOS
 from conveyor_twin.ros.scale_node import MACRO_ROLE, ScaleNode
 from conveyor_twin.wire import cdr
 
@@ -22,12 +22,13 @@ class MacroNode(ScaleNode):
                                                  g.resolution, g.nx, g.ny)
                           for g in stage.grids]
         self.density_pub = self.create_publisher(DensityGrid, 'density', STREAM_QOS)
+        self._pub_density = raw_publish(self.density_pub)
 
     def publish_step(self, inp: StepInput) -> None:
         """Publish every macro zone's density for the step just taken."""
         for encoder, grid in zip(self._encoders, self.stage.grids):
-            self.density_pub.publish(encoder.encode(inp.time_ns, inp.step, grid.density,
-                                                    grid.total_parts()))
+            self._pub_density(encoder.encode(inp.time_ns, inp.step, grid.density,
+                                             grid.total_parts()))
 
     def spawn_reply(self, body: bytes) -> bytes:
         """Parts are spawned by the micro scale; the macro node only acknowledges."""
