@@ -128,37 +128,46 @@ def take_mask(rho: np.ndarray, mask: np.ndarray, h: float) -> float:
 
 
 @njit(cache=True)
-def window_candidate(acc: np.ndarray, start: int, w: int, threshold: float,
-                     out: np.ndarray) -> int:
-    """Find the first cell (row-major, from flat index ``start``) whose window holds a part.
+def window_candidate(acc: np.ndarray, ranges: np.ndarray, cur: np.ndarray, w: int,
+                     threshold: float, out: np.ndarray) -> bool:
+    """Find the next cell whose window holds a part, scanning only the cell ranges given.
 
-    The window is the ``(2 w + 1)^2`` block around the cell. ``out`` receives
-    ``(j, i, sum, centroid_j, centroid_i)`` (centroid in cell units, mass-weighted).
-    Return the flat index of the cell, or -1.
+    ``ranges`` ``(m, 4)`` holds ``(j0, j1, i0, i1)`` blocks of cells to scan (row-major within
+    a block); ``cur`` ``(2,)`` is the cursor (block, flat index in the block) to start from and
+    is left on the cell found. The window is the ``(2 w + 1)^2`` block around the cell. ``out``
+    receives ``(j, i, sum, centroid_j, centroid_i)`` (centroid in cells, mass-weighted).
+    Return False when no window from the cursor on holds ``threshold``.
     """
     ny, nx = acc.shape
-    for flat in range(start, ny * nx):
-        j = flat // nx
-        i = flat - j * nx
-        if acc[j, i] <= 0.0:
-            continue
-        total = 0.0
-        cj = 0.0
-        ci = 0.0
-        for jj in range(max(0, j - w), min(ny, j + w + 1)):
-            for ii in range(max(0, i - w), min(nx, i + w + 1)):
-                a = acc[jj, ii]
-                total += a
-                cj += a * jj
-                ci += a * ii
-        if total >= threshold:
-            out[0] = j
-            out[1] = i
-            out[2] = total
-            out[3] = cj / total
-            out[4] = ci / total
-            return flat
-    return -1
+    while cur[0] < ranges.shape[0]:
+        j0, j1, i0, i1 = ranges[cur[0], 0], ranges[cur[0], 1], ranges[cur[0], 2], ranges[cur[0], 3]
+        bw = i1 - i0
+        size = (j1 - j0) * bw
+        for flat in range(cur[1], size):
+            j = j0 + flat // bw
+            i = i0 + flat - (flat // bw) * bw
+            if acc[j, i] <= 0.0:
+                continue
+            total = 0.0
+            cj = 0.0
+            ci = 0.0
+            for jj in range(max(0, j - w), min(ny, j + w + 1)):
+                for ii in range(max(0, i - w), min(nx, i + w + 1)):
+                    a = acc[jj, ii]
+                    total += a
+                    cj += a * jj
+                    ci += a * ii
+            if total >= threshold:
+                out[0] = j
+                out[1] = i
+                out[2] = total
+                out[3] = cj / total
+                out[4] = ci / total
+                cur[1] = flat
+                return True
+        cur[0] += 1
+        cur[1] = 0
+    return False
 
 
 @njit(cache=True)
@@ -173,13 +182,15 @@ def window_subtract(acc: np.ndarray, j: int, i: int, w: int, total: float,
 
 
 @njit(cache=True)
-def release_windows(acc: np.ndarray, w: int, ox: float, oy: float, h: float, vel: np.ndarray,
+def release_windows(acc: np.ndarray, ranges: np.ndarray, w: int, ox: float, oy: float, h: float,
+                    vel: np.ndarray,
                     offsets: np.ndarray, d: float, nx_: float, ny_: float, back: bool,
                     max_fail: int, cand: np.ndarray, rot: np.ndarray, part_type: int,
                     counters, ids, ptype, P,
                     pt, shp, shp_verts, act_state, act_verts, va, vb, out) -> np.ndarray:
     """Release whole parts wherever a window of ``acc`` holds one; return (released, failed).
 
+    Only the cells of ``ranges`` are scanned (see :func:`window_candidate`).
     A part goes to ``(ox + (ci + 0.5) h, oy + (cj + 0.5) h)`` [m] (the window's mass centre
     ``(cj, ci)`` in cells) with the velocity ``vel[round(cj), round(ci)]`` [m/s]; if it would
     overlap, the ``offsets`` (along, out) in units of ``d`` [m] relative to the outward normal
@@ -190,11 +201,10 @@ def release_windows(acc: np.ndarray, w: int, ox: float, oy: float, h: float, vel
     :func:`conveyor_twin.micro.sources.place`.
     """
     res = np.zeros(2, dtype=np.int64)
+    cur = np.zeros(2, dtype=np.int64)
     tx, ty = -ny_, nx_
-    start = 0
     while res[1] < max_fail:
-        flat = window_candidate(acc, start, w, 1.0, cand)
-        if flat < 0:
+        if not window_candidate(acc, ranges, cur, w, 1.0, cand):
             break
         j = int(cand[0])
         i = int(cand[1])
@@ -230,5 +240,5 @@ def release_windows(acc: np.ndarray, w: int, ox: float, oy: float, h: float, vel
             window_subtract(acc, j, i, w, total, 1.0)
             res[0] += 1
             continue
-        start = flat + 1
+        cur[1] += 1
     return res

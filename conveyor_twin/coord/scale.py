@@ -69,6 +69,9 @@ class _Region:
         else:
             self.active = np.ones((g.ny, g.nx), dtype=np.uint8)
         self.acc = np.zeros((g.ny, g.nx))
+        self.face_ranges = [np.array([[0, g.ny, 0, 1]]), np.array([[0, g.ny, 0, 1]]),
+                            np.array([[0, 1, 0, g.nx]]), np.array([[0, 1, 0, g.nx]])]
+        self.update_ranges()
         # boundary faces: left/right (ny, 1), bottom/top (1, nx)
         self.face_acc = [np.zeros((g.ny, 1)), np.zeros((g.ny, 1)), np.zeros((1, g.nx)),
                          np.zeros((1, g.nx))]
@@ -89,6 +92,17 @@ class _Region:
         self.has_sink_cells = bool(self.sink_cells.any())
         ny, nx = g.ny, g.nx
         self.sides = [(0, ny), (ny, 2 * ny), (2 * ny, 2 * ny + nx), (2 * ny + nx, 2 * (ny + nx))]
+
+    def update_ranges(self) -> None:
+        """List the cell blocks of the micro tiles (where released mass can wait)."""
+        t = self.tiles
+        if t is None:
+            self.ranges = np.zeros((0, 4), dtype=np.int64)
+            return
+        g = self.sim.grid
+        ty, tx = np.nonzero(~t.macro)
+        self.ranges = np.stack([ty * t.tc, np.minimum(g.ny, (ty + 1) * t.tc), tx * t.tc,
+                                np.minimum(g.nx, (tx + 1) * t.tc)], axis=1).astype(np.int64)
 
     def pending(self) -> float:
         """Mass waiting in the accumulators [parts]."""
@@ -229,19 +243,20 @@ class ScaleCoupling:
                  (x_end + off, g.origin_y, vc[:, -1:], 1.0, 0.0),
                  (g.origin_x, g.origin_y - off - g.h, vc[:1], 0.0, -1.0),
                  (g.origin_x, y_end + off, vc[-1:], 0.0, 1.0))
-        for acc, (ox, oy, vel, nx_, ny_) in zip(region.face_acc, sides):
+        for acc, rng, (ox, oy, vel, nx_, ny_) in zip(region.face_acc, region.face_ranges, sides):
             if self._tries > 0 and acc.max() >= 1.0 / (2 * region.w + 1):
-                self._release_from(region, acc, ox, oy, vel, nx_, ny_, False)
-        if region.tiles is not None and self._tries > 0:
-            self._release_from(region, region.acc, g.origin_x, g.origin_y, vc, 1.0, 0.0, False)
+                self._release_from(region, acc, rng, ox, oy, vel, nx_, ny_)
+        if region.tiles is not None and self._tries > 0 and region.ranges.shape[0]:
+            self._release_from(region, region.acc, region.ranges, g.origin_x, g.origin_y, vc,
+                               1.0, 0.0)
 
-    def _release_from(self, region: _Region, acc: np.ndarray, ox: float, oy: float,
-                      vel: np.ndarray, nx_: float, ny_: float, back: bool) -> None:
+    def _release_from(self, region: _Region, acc: np.ndarray, ranges: np.ndarray, ox: float,
+                      oy: float, vel: np.ndarray, nx_: float, ny_: float) -> None:
         m = self.micro
         s = m.state
         w, h = region.w, region.sim.grid.h
-        res = _ho.release_windows(acc, w, ox, oy, h, vel, region.offsets, 2.0 * self.radius
-                                  + _CLEARANCE, nx_, ny_, back, self._tries, self._cand,
+        res = _ho.release_windows(acc, ranges, w, ox, oy, h, vel, region.offsets, 2.0 * self.radius
+                                  + _CLEARANCE, nx_, ny_, False, self._tries, self._cand,
                                   region.rot,
                                   self.part_type, s.counters, s.ids, s.part_type, s.P, m.pt,
                                   m.shapes, m.shape_verts, m.act_state, m.act_verts, m._va,
@@ -267,6 +282,7 @@ class ScaleCoupling:
             sim.parts_deposited += float(back.sum())
             region.acc[turned_macro] = 0.0
         region.active[:] = new
+        region.update_ranges()
         # cells that turned micro give their mass to the accumulators next step
 
     def force_tiles(self, zone: str, macro: np.ndarray) -> None:
