@@ -242,3 +242,14 @@ def test_stopper_queue_grows_and_dissolves_at_both_scales() -> None:
     # both are draining 0.5 s after opening and nearly gone 3 s after it
     assert micro_q[8] < 0.8 * 2000 and multi_q[8] < 0.8 * 2000
     assert micro_q[-1] < 0.05 * 2000 and multi_q[-1] < 0.05 * 2000
+
+
+def test_reset_rebinds_the_coupling_to_the_new_simulators() -> None:
+    twin, micro, macro, coupling = _twin(_cell(MID_MACRO, rate=400.0))
+    twin.step(3500)
+    assert coupling.ledger()['captured'] > 0
+    twin.reset()
+    assert coupling.micro is micro.sim and coupling.regions[0].sim is macro.grids[0]
+    assert coupling.ledger()['entered'] == 0.0
+    twin.step(3500)
+    assert coupling.ledger()['captured'] > 0 and abs(coupling.ledger()['residual']) <= 1e-9
