@@ -9,6 +9,7 @@ BENCHES = {
     'micro': 'conveyor_twin.bench.micro',
     'macro': 'conveyor_twin.bench.macro',
     'record': 'conveyor_twin.bench.record',
+    'twin': 'conveyor_twin.bench.twin',
     'scale': 'conveyor_twin.bench.scale',
 }
 

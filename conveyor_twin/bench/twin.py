@@ -1,0 +1,283 @@
+"""``conveyor-twin bench twin``: the node suite at 1 kHz, measured from another process.
+
+The twin (``conveyor-twin run``, realtime, composed by default or ``--split``) runs on the
+default cell without its feeder; a separate subscriber process (raw subscriptions, rclpy's
+EventsExecutor) places ``--parts`` parts on the belt through ``spawn_parts`` (a lattice over
+x 0.3-3 m), sets the belt to ``--belt-speed`` so they are conveyed but stay on the belt for the
+run, lets ``--settle`` seconds pass, then measures for ``--duration`` seconds:
+
+- per stream: messages, rate [Hz], inter-arrival p50/p99/max [ms], lost messages (gaps in the
+  sim-time stamps, which advance one step per message);
+- overruns and step times from the twin's ``diagnostics`` (1 Hz) during the window, and the
+  twin's closing summary.
+
+Targets (issue 5): 0 overruns, >= 999 Hz per stream, p99 <= 1.5 ms, no loss.
+"""
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Dict, List, Optional
+
+import numpy as np
+
+DEFAULT_DURATION = 60.0   # s measured
+DEFAULT_PARTS = 1000
+DEFAULT_SETTLE = 3.0      # s between placing the parts and measuring
+DEFAULT_BELT_SPEED = 0.05  # m/s: 1000 parts stay on the 6 m belt for a minute
+STREAMS = ('parts', 'light_barriers', 'belt_states', 'actuator_states', '/clock')
+CONNECT_TIMEOUT = 60.0    # s for the twin to appear
+RESULT_PREFIX = 'bench twin subscriber: '
+STEP_NS = 1_000_000
+
+
+def lattice(n: int, *, x0: float = 0.3, y_half: float = 0.2, pitch_y: float = 0.04,
+            pitch_x: float = 0.03) -> np.ndarray:
+    """Return (x, y) of ``n`` parts on a lattice over the belt [m]."""
+    rows = int(2 * y_half / pitch_y) + 1
+    k = np.arange(n)
+    x = x0 + (k // rows) * pitch_x
+    y = -y_half + (k % rows) * pitch_y
+    return np.stack([x, y])
+
+
+def quiet_cell_file(directory: str) -> str:
+    """Write the default cell without its feeder; return the file."""
+    import yaml
+
+    from conveyor_twin.cell import default_cell_text
+    doc = yaml.safe_load(default_cell_text())
+    doc['sources'] = []
+    path = os.path.join(directory, 'bench_twin_cell.yaml')
+    with open(path, 'w') as f:
+        yaml.safe_dump(doc, f)
+    return path
+
+
+def _stats(times_ns: List[int], stamps_ns: List[int], window_s: float,
+           step_ns: int = STEP_NS) -> Dict[str, float]:
+    if len(times_ns) < 2:
+        return {'messages': len(times_ns)}
+    t = np.asarray(times_ns, np.int64)
+    s = np.asarray(stamps_ns, np.int64)
+    gaps = np.diff(t) * 1e-6
+    steps = np.diff(s) // step_ns
+    lost = int(np.sum(np.maximum(steps - 1, 0)))
+    return {'messages': len(t), 'rate_hz': round(len(t) / window_s, 2),
+            'interarrival_p50_ms': round(float(np.median(gaps)), 4),
+            'interarrival_p99_ms': round(float(np.percentile(gaps, 99)), 4),
+            'interarrival_max_ms': round(float(gaps.max()), 4),
+            'lost': lost, 'out_of_order': int(np.sum(steps <= 0))}
+
+
+def subscriber_main(argv: List[str]) -> int:
+    """The measuring process: place the parts, then record arrivals of every stream."""
+    p = argparse.ArgumentParser()
+    p.add_argument('--parts', type=int, default=DEFAULT_PARTS)
+    p.add_argument('--duration', type=float, default=DEFAULT_DURATION)
+    p.add_argument('--settle', type=float, default=DEFAULT_SETTLE)
+    p.add_argument('--belt-speed', type=float, default=DEFAULT_BELT_SPEED)
+    args = p.parse_args(argv)
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.experimental import EventsExecutor
+    from rclpy.node import Node
+    from conveyor_twin_msgs.msg import (ActuatorStates, BeltCommand, BeltStates,
+                                        LightBarrierStates, PartStates)
+    from conveyor_twin_msgs.srv import SpawnParts
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rosgraph_msgs.msg import Clock
+
+    from conveyor_twin.ros.qos import CLOCK_QOS, COMMAND_QOS, SLOW_QOS, STREAM_QOS
+
+    types = {'parts': PartStates, 'light_barriers': LightBarrierStates,
+             'belt_states': BeltStates, 'actuator_states': ActuatorStates, '/clock': Clock}
+    context = Context()
+    rclpy.init(context=context)
+    node = Node('bench_twin_subscriber', context=context)
+    executor = EventsExecutor(context=context)
+    executor.add_node(node)
+    recording = [False]
+    arrivals = {t: ([], []) for t in STREAMS}
+    diagnostics: List[Dict[str, str]] = []
+
+    def on_raw(data: bytes, log) -> None:
+        if recording[0]:
+            log[0].append(time.monotonic_ns())
+            log[1].append(int.from_bytes(data[4:8], 'little') * 1_000_000_000
+                          + int.from_bytes(data[8:12], 'little'))
+
+    subs = [node.create_subscription(types[t], t, lambda d, log=arrivals[t]: on_raw(d, log),
+                                     CLOCK_QOS if t == '/clock' else STREAM_QOS, raw=True)
+            for t in STREAMS]
+    subs.append(node.create_subscription(
+        DiagnosticArray, 'diagnostics',
+        lambda m: diagnostics.append({kv.key: kv.value for kv in m.status[0].values}),
+        SLOW_QOS))
+    spawn = node.create_client(SpawnParts, 'spawn_parts')
+    belt = node.create_publisher(BeltCommand, 'belt_command', COMMAND_QOS)
+
+    def spin_for(seconds: float, until=lambda: False) -> bool:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            if until():
+                return True
+            executor.spin_once(timeout_sec=0.05)
+        return until()
+
+    ok = spin_for(CONNECT_TIMEOUT, lambda: spawn.service_is_ready()
+                  and belt.get_subscription_count() > 0
+                  and all(s.get_publisher_count() > 0 for s in subs))
+    if not ok:
+        print('bench twin: the twin did not appear', file=sys.stderr)
+        return 1
+    from rclpy.duration import Duration
+    belt.publish(BeltCommand(belt='main', speed=args.belt_speed))
+    belt.wait_for_all_acked(Duration(seconds=10))
+    placed = 0
+    xy = lattice(args.parts)
+    for start in range(0, args.parts, 250):  # a few calls: each places its parts in one step
+        chunk = xy[:, start:start + 250]
+        future = spawn.call_async(SpawnParts.Request(
+            part_type='spacer', x=chunk[0].tolist(), y=chunk[1].tolist(),
+            yaw=[0.0] * chunk.shape[1]))
+        spin_for(30.0, future.done)
+        if future.done() and future.result().success:
+            placed += chunk.shape[1]
+        else:
+            print(f'bench twin: spawn failed: {future.result()}', file=sys.stderr)
+    spin_for(args.settle)
+    diagnostics.clear()
+    recording[0] = True
+    t0 = time.monotonic()
+    spin_for(args.duration)
+    recording[0] = False
+    window = time.monotonic() - t0
+    streams = {t: _stats(a[0], a[1], window) for t, a in arrivals.items()}
+    result = {'placed_parts': placed, 'window_s': round(window, 3), 'streams': streams,
+              'diagnostics': diagnostics}
+    print(RESULT_PREFIX + json.dumps(result), flush=True)
+    executor.shutdown(timeout_sec=2.0)
+    node.destroy_node()
+    context.try_shutdown()
+    return 0
+
+
+def _window_figures(diagnostics: List[Dict[str, str]]) -> Dict[str, object]:
+    if len(diagnostics) < 2:
+        return {}
+    first, last = diagnostics[0], diagnostics[-1]
+    return {
+        'overruns_in_window': int(last['overruns']) - int(first['overruns']),
+        'diagnostics_messages': len(diagnostics),
+        'step_time_mean_ms_median': float(np.median(
+            [float(d['step_time_mean_ms']) for d in diagnostics])),
+        'step_time_p99_ms_max': max(float(d['step_time_p99_ms']) for d in diagnostics),
+        'step_time_max_ms_max': max(float(d['step_time_max_ms']) for d in diagnostics),
+        'micro_in_flight': [int(float(diagnostics[0].get('micro_in_flight', 0))),
+                            int(float(last.get('micro_in_flight', 0)))],
+    }
+
+
+def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[str, object]:
+    """Run the twin in one layout and the subscriber process; return the figures."""
+    env = dict(os.environ)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    cell = quiet_cell_file(directory)
+    twin_cmd = [sys.executable, '-m', 'conveyor_twin.cli', 'run', '--cell', cell,
+                '--mode', 'realtime', '--duration', '0', '--json', '--quiet']
+    if split:
+        twin_cmd.append('--split')
+    twin = subprocess.Popen(twin_cmd, env=env, stdout=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    sub = subprocess.Popen(
+        [sys.executable, '-m', 'conveyor_twin.bench.twin', '--subscriber', '--parts',
+         str(args.parts), '--duration', str(args.duration), '--settle', str(args.settle),
+         '--belt-speed', str(args.belt_speed)], env=env, stdout=subprocess.PIPE, text=True)
+    result: Optional[dict] = None
+    try:
+        for line in sub.stdout:
+            if line.startswith(RESULT_PREFIX):
+                result = json.loads(line[len(RESULT_PREFIX):])
+        sub.wait(60)
+    finally:
+        os.killpg(twin.pid, signal.SIGINT)
+        try:
+            out, _ = twin.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            os.killpg(twin.pid, signal.SIGKILL)
+            out, _ = twin.communicate()
+    summary = None
+    for line in out.splitlines():
+        if line.startswith('{'):
+            summary = json.loads(line)
+    figures: Dict[str, object] = {'layout': 'split' if split else 'composed'}
+    if result is None:
+        figures['error'] = 'the subscriber process gave no result'
+        return figures
+    figures.update({k: v for k, v in result.items() if k != 'diagnostics'})
+    figures.update(_window_figures(result['diagnostics']))
+    if summary is not None:
+        figures['twin_summary'] = {k: summary.get(k) for k in
+                                   ('steps', 'overruns', 'real_time_factor', 'step_time_ms')}
+    return figures
+
+
+def _print(figures: Dict[str, object]) -> None:
+    print(f"{figures['layout']}: {figures.get('placed_parts')} parts placed, window "
+          f"{figures.get('window_s')} s, micro parts in flight "
+          f"{figures.get('micro_in_flight')}")
+    if 'error' in figures:
+        print(f"  error: {figures['error']}")
+        return
+    for topic, s in figures['streams'].items():
+        if 'rate_hz' not in s:
+            print(f'  {topic:<16} {s}')
+            continue
+        print(f"  {topic:<16} {s['rate_hz']:8.1f} Hz  inter-arrival p50 "
+              f"{s['interarrival_p50_ms']:.3f} p99 {s['interarrival_p99_ms']:.3f} max "
+              f"{s['interarrival_max_ms']:.1f} ms  lost {s['lost']}")
+    print(f"  overruns in window {figures.get('overruns_in_window')}; step time mean "
+          f"(median of 1 s windows) {figures.get('step_time_mean_ms_median')} ms, p99 (worst "
+          f"window) {figures.get('step_time_p99_ms_max')} ms, max "
+          f"{figures.get('step_time_max_ms_max')} ms")
+    print(f"  twin summary: {figures.get('twin_summary')}")
+
+
+def main(argv: List[str]) -> int:
+    """Entry point of ``conveyor-twin bench twin``."""
+    if argv[:1] == ['--subscriber']:
+        return subscriber_main(argv[1:])
+    p = argparse.ArgumentParser(prog='conveyor-twin bench twin', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument('--duration', type=float, default=DEFAULT_DURATION,
+                   help='measured wall time [s]')
+    p.add_argument('--parts', type=int, default=DEFAULT_PARTS)
+    p.add_argument('--settle', type=float, default=DEFAULT_SETTLE,
+                   help='wait after placing the parts [s]')
+    p.add_argument('--belt-speed', type=float, default=DEFAULT_BELT_SPEED, help='[m/s]')
+    p.add_argument('--layout', choices=('composed', 'split', 'both'), default='composed')
+    p.add_argument('--json', action='store_true', help='print one JSON object')
+    args = p.parse_args(argv)
+    layouts = {'composed': [False], 'split': [True], 'both': [False, True]}[args.layout]
+    results = []
+    with tempfile.TemporaryDirectory() as directory:
+        for split in layouts:
+            figures = run_layout(split, args, directory)
+            results.append(figures)
+            if not args.json:
+                _print(figures)
+    if args.json:
+        print(json.dumps({'parts': args.parts, 'duration_s': args.duration,
+                          'layouts': results}))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))
