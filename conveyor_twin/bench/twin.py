@@ -17,6 +17,7 @@ Targets (issue 5): 0 overruns, >= 999 Hz per stream, p99 <= 1.5 ms, no loss.
 import argparse
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -141,17 +142,28 @@ def subscriber_main(argv: List[str]) -> int:
     belt.publish(BeltCommand(belt='main', speed=args.belt_speed))
     belt.wait_for_all_acked(Duration(seconds=10))
     placed = 0
-    xy = lattice(args.parts)
-    for start in range(0, args.parts, 250):  # a few calls: each places its parts in one step
-        chunk = xy[:, start:start + 250]
-        future = spawn.call_async(SpawnParts.Request(
-            part_type='spacer', x=chunk[0].tolist(), y=chunk[1].tolist(),
-            yaw=[0.0] * chunk.shape[1]))
-        spin_for(30.0, future.done)
-        if future.done() and future.result().success:
-            placed += chunk.shape[1]
-        else:
-            print(f'bench twin: spawn failed: {future.result()}', file=sys.stderr)
+    xy = lattice(2 * args.parts)  # spare places: some lattice points hit the deflector
+    start = 0
+    while placed < args.parts and start < xy.shape[1]:
+        # a few calls of up to 250 parts; each places its parts at one step boundary
+        chunk = xy[:, start:start + min(250, args.parts - placed)]
+        start += chunk.shape[1]
+        keep = np.ones(chunk.shape[1], bool)
+        for _ in range(3):  # drop the places the twin refuses (overlaps) and try again
+            future = spawn.call_async(SpawnParts.Request(
+                part_type='spacer', x=chunk[0, keep].tolist(), y=chunk[1, keep].tolist(),
+                yaw=[0.0] * int(keep.sum())))
+            spin_for(30.0, future.done)
+            response = future.result() if future.done() else None
+            if response is not None and response.success:
+                placed += len(response.id)
+                break
+            refused = re.search(r'entries \[([0-9, ]+)\]', response.message if response else '')
+            if refused is None:
+                print(f'bench twin: spawn failed: {response}', file=sys.stderr)
+                break
+            indices = np.flatnonzero(keep)[[int(i) for i in refused.group(1).split(',')]]
+            keep[indices] = False
     spin_for(args.settle)
     diagnostics.clear()
     recording[0] = True
