@@ -14,7 +14,9 @@ from a step listener, every accepted command with the step at which it took effe
 ``forward=False`` to collect the bytes of a re-run without publishing them.
 
 Log time of a recorded message: the simulation time it carries (``header.stamp``; a Clock's
-time), else (markers) the simulation time of the step that published it.
+time), else (markers) the simulation time when it was published (the micro node builds
+markers off the stepping thread: at or a few steps after the step they show, which is the
+latest stamp of their markers).
 """
 
 import argparse

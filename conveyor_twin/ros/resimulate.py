@@ -9,7 +9,12 @@ and steps it on demand while reading the recording in file order: the recorded m
 sequence number ``s`` on a topic is compared with the ``s``-th message the re-run publishes on
 it (sequence numbers count every message offered, so decimation and queue drops only skip).
 
-``diagnostics`` are not compared: they carry wall-clock step times. Parts placed through the
+``markers`` are matched by their stamp, not their number: the micro node builds them off the
+stepping thread and, under load, publishes only the latest due one, so which steps have markers
+depends on the wall clock; the re-run builds the markers of every due step on the stepping
+thread with the same :class:`~conveyor_twin.ros.markers.CellMarkers` and the recorded ones
+must be among them, byte for byte. ``diagnostics`` are not compared: they carry wall-clock step
+times. Parts placed through the
 ``spawn_parts`` service and ``reset`` calls are not recorded, so a recording that used them does
 not re-simulate.
 """
@@ -127,6 +132,26 @@ def _walk(x: Any, y: Any, path: str) -> Optional[Tuple[str, str, str]]:
     return None if same else (path, repr(x), repr(y))
 
 
+_MARKER_TYPE = 'visualization_msgs/msg/MarkerArray'
+_decoders: Dict[str, Any] = {}
+
+
+def _marker_stamp(data: bytes) -> Optional[int]:
+    """Return the latest header stamp of a MarkerArray's markers [ns] (the time it was built
+    for: static markers are stamped 0), or None if it has none or cannot be decoded."""
+    try:
+        decode = _decoders.get(_MARKER_TYPE)
+        if decode is None:
+            from mcap_ros2._dynamic import generate_dynamic
+            decode = _decoders[_MARKER_TYPE] = generate_dynamic(
+                _MARKER_TYPE, SCHEMAS[_MARKER_TYPE])[_MARKER_TYPE]
+        stamps = [mk.header.stamp.sec * 1_000_000_000 + mk.header.stamp.nanosec
+                  for mk in decode(data).markers]
+    except Exception:  # noqa: BLE001 - then the log time must do
+        return None
+    return max(stamps) if stamps else None
+
+
 def _first_byte(a: bytes, b: bytes) -> int:
     for i, (u, v) in enumerate(zip(a, b)):
         if u != v:
@@ -162,13 +187,14 @@ def resimulate(path: str, *, context: Any) -> ResimReport:
     namespace = meta.get('namespace', '') or None
     report = ResimReport(path, complete_source=reader.is_complete(path))
     twin = ComposedTwin(cell, seed=seed, mode=TimeMode.LOCKSTEP, context=context,
-                        namespace=namespace, markers_rate=markers_rate)
+                        namespace=namespace, markers_rate=0.0)
     try:
         if twin.twin.dt_ns != step_ns:
             raise RecordingError(f'{path}: metadata step_ns {step_ns} differs from the step of '
                                  f'cell.yaml ({twin.twin.dt_ns} ns)')
         _schedule(path, twin, step_ns, report)
-        _compare(path, twin, tap, step_ns, report)
+        markers = _build_markers(twin, cell, markers_rate)
+        _compare(path, twin, tap, step_ns, report, markers)
     finally:
         twin.stop()
     return report
@@ -193,7 +219,29 @@ def _schedule(path: str, twin: Any, step_ns: int, report: ResimReport) -> None:
         report.commands += 1
 
 
-def _compare(path: str, twin: Any, tap: Any, step_ns: int, report: ResimReport) -> None:
+def _build_markers(twin: Any, cell: Any, markers_rate: float) -> Dict[int, bytes]:
+    """Build the MarkerArray of every due step on the stepping thread; return {stamp: bytes}."""
+    from conveyor_twin.ros.markers import CellMarkers
+    built: Dict[int, bytes] = {}
+    if markers_rate <= 0:
+        return built
+    every = max(1, round(1.0 / (markers_rate * cell.settings.step)))  # as ScaleNode
+    markers, stage = CellMarkers(cell), twin.micro_stage
+
+    def on_step(inp: Any, _commands: Any) -> None:
+        if inp.step % every == 0:
+            _, part_type, x, y = stage.parts()[:4]
+            built[inp.time_ns] = markers.build(inp.time_ns, part_type, x, y,
+                                               stage.barrier_blocked(), inp.actuator_position)
+            while len(built) > 1000:
+                del built[next(iter(built))]
+
+    twin.twin.step_listeners.append(on_step)
+    return built
+
+
+def _compare(path: str, twin: Any, tap: Any, step_ns: int, report: ResimReport,
+             markers: Dict[int, bytes]) -> None:
     produced: Dict[str, Deque[Tuple[int, bytes]]] = {}
     counters: Counter = Counter()
 
@@ -217,6 +265,10 @@ def _compare(path: str, twin: Any, tap: Any, step_ns: int, report: ResimReport) 
         if m.topic not in specs:
             raise RecordingError(f'{path}: topic {m.topic} is not published by the twin '
                                  f'(namespace {namespace!r})')
+        if specs[m.topic].name == 'markers':
+            if not _compare_marker(m, markers, core, step_ns, report, specs):
+                return
+            continue
         queue = produced.setdefault(m.topic, deque())
         limit = step + 2
         while True:
@@ -244,3 +296,26 @@ def _compare(path: str, twin: Any, tap: Any, step_ns: int, report: ResimReport) 
                                            resimulated)
             return
         report.compared[m.topic] += 1
+
+
+def _compare_marker(m: Any, markers: Dict[int, bytes], core: Any, step_ns: int,
+                    report: ResimReport, specs: Dict[str, Any]) -> bool:
+    """Compare one recorded MarkerArray with the re-run's of the same stamp; False: differs."""
+    stamp = _marker_stamp(m.data)
+    stamp = m.log_time if stamp is None else stamp
+    while core.time_ns < stamp:
+        core.step(1)
+        report.steps = core.step_index
+    data = markers.pop(stamp, None)
+    if data is None:
+        report.difference = Difference(
+            m.topic, m.sequence, stamp // step_ns, m.log_time, None, '',
+            f'the re-run builds no markers stamped {stamp} ns', '')
+        return False
+    if data != m.data:
+        name, recorded, resimulated = _field_difference(specs[m.topic].type_name, m.data, data)
+        report.difference = Difference(m.topic, m.sequence, stamp // step_ns, m.log_time,
+                                       _first_byte(m.data, data), name, recorded, resimulated)
+        return False
+    report.compared[m.topic] += 1
+    return True
