@@ -120,15 +120,22 @@ def run_split(args: argparse.Namespace) -> int:
         [sys.executable, '-m', 'conveyor_twin.ros.split'] + ros_args, env=env,
         stdout=subprocess.PIPE, text=True)
     summary = None
-    try:
+
+    def read_until_eof() -> None:
+        nonlocal summary
         for line in coordinator.stdout:
             if line.startswith(SUMMARY_PREFIX):
                 summary = json.loads(line[len(SUMMARY_PREFIX):])
             elif not args.quiet:
                 print(line, end='', file=sys.stderr)
-        code = coordinator.wait()
-    except KeyboardInterrupt:
-        coordinator.send_signal(signal.SIGINT)
+
+    try:
+        try:
+            read_until_eof()
+        except KeyboardInterrupt:
+            # the coordinator stops on SIGINT and prints its summary: keep reading it
+            coordinator.send_signal(signal.SIGINT)
+            read_until_eof()
         code = coordinator.wait(30)
     finally:
         for proc in scales:
