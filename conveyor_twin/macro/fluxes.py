@@ -55,12 +55,15 @@ def limited_slope(dl: float, dr: float, limiter: int) -> float:
 
 @njit(cache=True)
 def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float,
-                  has_negative: bool) -> None:
+                  has_negative: bool, hi: int) -> None:
     """Receiver cut of one line (faces ``0..n``, cells ``0..n-1``).
 
     :param has_negative: False if no face amount is negative (the second pass is skipped).
+    :param hi: one past the last cell that could overflow (:func:`_line_excess`): the
+        downstream-first pass starts there, as every face downstream of it is left unchanged
+        (a cell that cannot overflow, with its downstream face unchanged, keeps its inflow).
     """
-    for f in range(n - 1, -1, -1):
+    for f in range(hi - 1, -1, -1):
         af = a[f]
         if af <= 0.0:
             continue
@@ -98,15 +101,16 @@ def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float,
 
 @njit(cache=True)
 def _line_excess(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float) -> int:
-    """Count the cells of one line whose ``rho + inflow`` exceeds ``rho_max``.
+    """Return one past the last cell of one line whose ``rho + inflow`` exceeds ``rho_max``
+    (0: none).
 
-    Written as a branch-free count so that it vectorises (a max-reduction does not).
+    Written as a branch-free integer max-reduction so that it vectorises.
     """
-    count = 0
+    hi = 0
     for i in range(n):
         v = rho[i] + max(a[i], 0.0) - min(a[i + 1], 0.0)
-        count += v > rho_max
-    return count
+        hi = max(hi, (i + 1) * (v > rho_max))
+    return hi
 
 
 @njit(cache=True)
@@ -224,9 +228,10 @@ def sweep_x(rho: np.ndarray, wx: np.ndarray, solid: np.ndarray, dts: float, h: f
                 negative += w < 0.0
                 aj[f] = w * k * (r[f - 1] if w > 0.0 else r[f])
         if capped:
-            if _line_excess(aj, r, nx, rho_max) > 0:
+            hi = _line_excess(aj, r, nx, rho_max)
+            if hi > 0:
                 negative += (aj[0] < 0.0) + (aj[nx] < 0.0)
-                _cap_line_pos(aj, r, nx, rho_max, negative > 0)
+                _cap_line_pos(aj, r, nx, rho_max, negative > 0, hi)
         for i in range(nx):
             r[i] += aj[i] - aj[i + 1]
         a0 = aj[0]
@@ -304,12 +309,35 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
                         if a[j, i] < 0.0:
                             a[j, i] *= s
     else:
-        for f in range(1, ny):
+        # Upwind: the demand of face row j + 1 and the overflow check of cell row j in one
+        # pass (row j's faces are final once row j + 1's are computed), so the cut needs no
+        # further pass over the grid; same arithmetic as the separate passes.
+        count = 0
+        i0 = nx
+        i1 = 0
+        j0 = ny
+        j1 = -1
+        for j in range(ny):
+            f = j + 1
+            if f < ny:
+                for i in range(nx):
+                    w = wy[f, i]
+                    negative += w < 0.0
+                    a[f, i] = w * k * (rho[f - 1, i] if w > 0.0 else rho[f, i])
+            if capped and _pair_excess(a[j], a[j + 1], rho[j], nx, rho_max) > 0:
+                count += 1
+                j0 = min(j0, j)
+                j1 = j
+                for i in range(nx):
+                    v = rho[j, i] + max(a[j, i], 0.0) - min(a[j + 1, i], 0.0)
+                    if v > rho_max:
+                        i0 = min(i0, i)
+                        i1 = max(i1, i + 1)
+        if count > 0:
             for i in range(nx):
-                w = wy[f, i]
-                negative += w < 0.0
-                a[f, i] = w * k * (rho[f - 1, i] if w > 0.0 else rho[f, i])
-    if capped:
+                negative += (a[0, i] < 0.0) + (a[ny, i] < 0.0)
+            _cap_grid_y(a, rho, rho_max, i0, i1, j0, j1, negative > 0)
+    if capped and limited:
         count = 0
         for j in range(ny):
             count += _pair_excess(a[j], a[j + 1], rho[j], nx, rho_max)
