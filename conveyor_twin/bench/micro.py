@@ -53,6 +53,10 @@ from conveyor_twin.cell.model import Cell
 from conveyor_twin.micro import MicroSim
 
 SCENE = Path(__file__).resolve().parent.parent / 'cell' / 'bench_micro.yaml'
+# Seed 000's force-based response used the material's stiffness (stainless steel spacers):
+# a line contact of two steel cylinders 10 mm high, k ~ (pi / 4) E* L with
+# E* = E / (2 (1 - nu^2)) ~ 110 GPa, L = 10 mm: ~ 9e8 N/m.
+SEED_STIFFNESS = 1e9          # N/m
 DEFAULT_SIZES = (100, 1000, 5000)
 DEFAULT_STEPS = 2000
 DEFAULT_WARMUP = 2000
@@ -114,12 +118,17 @@ def time_ours(n: int, steps: int, warmup: int) -> Dict[str, float]:
     """Time ``steps`` single steps of our simulator on the jam."""
     sim = jammed_sim(n, warmup)
     samples = np.zeros(steps, dtype=np.int64)
+    cpu = np.zeros(steps, dtype=np.int64)
     clock = time.perf_counter_ns
+    cpu_clock = time.thread_time_ns
     for k in range(steps):
+        c0 = cpu_clock()
         t0 = clock()
         sim.step(1)
         samples[k] = clock() - t0
+        cpu[k] = cpu_clock() - c0
     result = _stats(samples)
+    result.update({f'cpu_{k}': v for k, v in _stats(cpu).items()})
     t0 = clock()
     sim.step(steps)
     result['batched_ms'] = (clock() - t0) / 1e6 / steps
@@ -216,17 +225,22 @@ def time_pymunk(n: int, steps: int, warmup: int) -> Dict[str, float]:
         space.step(dt)
     total = np.zeros(steps, dtype=np.int64)
     step_only = np.zeros(steps, dtype=np.int64)
+    cpu = np.zeros(steps, dtype=np.int64)
     clock = time.perf_counter_ns
+    cpu_clock = time.thread_time_ns
     for k in range(steps):
         t0 = clock()
         drive()
         t1 = clock()
+        c1 = cpu_clock()
         space.step(dt)
+        cpu[k] = cpu_clock() - c1
         t2 = clock()
         total[k] = t2 - t0
         step_only[k] = t2 - t1
     result = {f'total_{k}': v for k, v in _stats(total).items()}
     result.update({f'step_{k}': v for k, v in _stats(step_only).items()})
+    result.update({f'step_cpu_{k}': v for k, v in _stats(cpu).items()})
     return result
 
 
@@ -303,6 +317,8 @@ def main(argv: List[str]) -> int:
             ours = entry['ours']['mean_ms']
             entry['ratio_step'] = entry['pymunk']['step_mean_ms'] / ours
             entry['ratio_total'] = entry['pymunk']['total_mean_ms'] / ours
+            entry['ratio_step_cpu_median'] = (entry['pymunk']['step_cpu_median_ms']
+                                              / entry['ours']['cpu_median_ms'])
         report['sizes'][str(n)] = entry
         if not args.json:
             _print_size(n, entry)
@@ -318,11 +334,19 @@ def main(argv: List[str]) -> int:
         report['penalty'] = largest_stable_step(
             args.stability_n, 'penalty', args.stability_time,
             penalty_stiffness=pick.stiffness, penalty_damping=pick.damping)
+        # the seed's material stiffness, same damping ratio as the picked pair
+        seed_damping = pick.damping * math.sqrt(SEED_STIFFNESS / pick.stiffness)
+        report['penalty_seed_stiffness'] = SEED_STIFFNESS
+        report['penalty_seed'] = largest_stable_step(
+            args.stability_n, 'penalty', args.stability_time,
+            penalty_stiffness=SEED_STIFFNESS, penalty_damping=seed_damping)
         if not args.json:
             print(f'largest stable/accurate step, N = {args.stability_n}: impulse '
                   f"{report['impulse']['largest_step']} s, penalty "
                   f"{report['penalty']['largest_step']} s (k = {pick.stiffness:.3g} N/m picked "
-                  f'by activity, springs/least physical = {pick.ratio:.3g})')
+                  f'by activity, springs/least physical = {pick.ratio:.3g}), penalty '
+                  f"{report['penalty_seed']['largest_step']} s (k = {SEED_STIFFNESS:.3g} N/m, "
+                  "the seed's steel-like stiffness)")
     if args.json:
         print(json.dumps(report))
     return 0
@@ -330,13 +354,15 @@ def main(argv: List[str]) -> int:
 
 def _print_size(n: int, entry: Dict) -> None:
     o = entry['ours']
-    line = (f"N = {n:5d}  ours {o['mean_ms']:.3f} ms mean, {o['p99_ms']:.3f} p99 "
+    line = (f"N = {n:5d}  ours {o['mean_ms']:.3f} ms mean, {o['median_ms']:.3f} median, "
+            f"{o['p99_ms']:.3f} p99, {o['cpu_median_ms']:.3f} CPU median "
             f"({o['batched_ms']:.3f} batched, max overlap {o['max_penetration_mm']:.3f} mm)")
     if 'pymunk' in entry:
         p = entry['pymunk']
         line += (f" | pymunk step {p['step_mean_ms']:.3f} mean, {p['step_p99_ms']:.3f} p99; "
                  f"total {p['total_mean_ms']:.3f} | ratio x{entry['ratio_step']:.2f} step, "
-                 f"x{entry['ratio_total']:.2f} total")
+                 f"x{entry['ratio_total']:.2f} total, x{entry['ratio_step_cpu_median']:.2f} "
+                 'CPU median step')
     print(line, flush=True)
 
 
