@@ -63,7 +63,11 @@ SH_XMIN = 5
 SH_YMIN = 6
 SH_XMAX = 7
 SH_YMAX = 8
-SH_COLUMNS = 9
+SH_AX = 9             # first core vertex [m] (segments and pegs: used by the grid binning)
+SH_AY = 10
+SH_BX = 11            # second core vertex (pegs: the first again)
+SH_BY = 12
+SH_COLUMNS = 13
 
 # --- actuator state columns (float64, one row per actuator, rewritten every substep) ---
 AS_ACTIVE = 0

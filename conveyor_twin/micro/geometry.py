@@ -15,8 +15,9 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from conveyor_twin.cell.model import Cell, Obstacle
-from conveyor_twin.micro.contacts import (SH_COLUMNS, SH_E, SH_MU, SH_NV, SH_OFF, SH_R,
-                                          SH_XMAX, SH_XMIN, SH_YMAX, SH_YMIN)
+from conveyor_twin.micro.contacts import (SH_AX, SH_AY, SH_BX, SH_BY, SH_COLUMNS, SH_E, SH_MU,
+                                          SH_NV, SH_OFF, SH_R, SH_XMAX, SH_XMIN, SH_YMAX,
+                                          SH_YMIN)
 
 # Most grid cells allowed; the cell size grows to stay below it.
 MAX_GRID_CELLS = 1 << 20
@@ -42,6 +43,8 @@ def obstacle_shapes(obstacles: Sequence[Obstacle]) -> Tuple[np.ndarray, np.ndarr
         row[SH_YMIN] = min(ys) - radius
         row[SH_XMAX] = max(xs) + radius
         row[SH_YMAX] = max(ys) + radius
+        row[SH_AX], row[SH_AY] = points[0]
+        row[SH_BX], row[SH_BY] = points[min(1, len(points) - 1)]
         rows.append(row)
         verts.extend((float(p[0]), float(p[1])) for p in points)
         owner.append(index)
@@ -107,6 +110,18 @@ def world_bounds(cell: Cell, shapes: np.ndarray,
     return (min(xs), min(ys), max(xs), max(ys))
 
 
+def _segment_distance(px: float, py: float, ax: float, ay: float, bx: float,
+                      by: float) -> float:
+    """Return the distance from point p to the segment a-b [m]."""
+    ex = bx - ax
+    ey = by - ay
+    l2 = ex * ex + ey * ey
+    f = 0.0
+    if l2 > 0.0:
+        f = min(max(((px - ax) * ex + (py - ay) * ey) / l2, 0.0), 1.0)
+    return math.hypot(px - (ax + f * ex), py - (ay + f * ey))
+
+
 def build_grid(bounds: Sequence[float], max_brad: float, margin: float, shapes: np.ndarray,
                min_h: float = 0.0) -> Grid:
     """Return the grid over ``bounds`` for parts up to ``max_brad`` [m] with ``margin`` [m]."""
@@ -121,13 +136,26 @@ def build_grid(bounds: Sequence[float], max_brad: float, margin: float, shapes: 
     ny = max(1, int(math.ceil(height / h)))
     lists: List[List[int]] = [[] for _ in range(nx * ny)]
     grow = max_brad + margin
+    # a part centred in a cell is at most half a diagonal from the cell's centre
+    half_diagonal = h * math.sqrt(0.5) * (1.0 + 1e-9) + 1e-12
     for s in range(shapes.shape[0]):
         cx0 = min(max(int(math.floor((shapes[s, SH_XMIN] - grow - x0) / h)), 0), nx - 1)
         cx1 = min(max(int(math.floor((shapes[s, SH_XMAX] + grow - x0) / h)), 0), nx - 1)
         cy0 = min(max(int(math.floor((shapes[s, SH_YMIN] - grow - y0) / h)), 0), ny - 1)
         cy1 = min(max(int(math.floor((shapes[s, SH_YMAX] + grow - y0) / h)), 0), ny - 1)
+        # segments and pegs: only the cells whose parts can reach the core (a long oblique
+        # deflector's bounding box holds many cells no part in which can touch it); border
+        # cells (parts outside the grid are clamped into them) keep the bounding-box rule
+        reach = shapes[s, SH_R] + grow + half_diagonal
+        segment = shapes[s, SH_NV] <= 2
+        ax, ay, bx, by = (shapes[s, SH_AX], shapes[s, SH_AY], shapes[s, SH_BX],
+                          shapes[s, SH_BY])
         for cy in range(cy0, cy1 + 1):
             for cx in range(cx0, cx1 + 1):
+                if (segment and 0 < cx < nx - 1 and 0 < cy < ny - 1
+                        and _segment_distance(x0 + (cx + 0.5) * h, y0 + (cy + 0.5) * h,
+                                              ax, ay, bx, by) > reach):
+                    continue
                 lists[cy * nx + cx].append(s)
     start = np.zeros(nx * ny + 1, dtype=np.int64)
     start[1:] = np.cumsum([len(cell) for cell in lists])
