@@ -17,6 +17,7 @@ from numba import njit
 import numpy as np
 
 from conveyor_twin.micro.sources import place
+from conveyor_twin.micro.state import C_N, P_X, P_Y, PT_BRAD
 
 # Sub-samples per cell edge when the footprint disc is rasterised.
 DEPOSIT_SAMPLES = 8
@@ -185,8 +186,8 @@ def window_subtract(acc: np.ndarray, j: int, i: int, w: int, total: float,
 def release_windows(acc: np.ndarray, ranges: np.ndarray, w: int, ox: float, oy: float, h: float,
                     vel: np.ndarray,
                     offsets: np.ndarray, d: float, nx_: float, ny_: float, back: bool,
-                    max_fail: int, cand: np.ndarray, rot: np.ndarray, part_type: int,
-                    counters, ids, ptype, P,
+                    max_fail: int, cand: np.ndarray, rot: np.ndarray, near: np.ndarray,
+                    part_type: int, counters, ids, ptype, P,
                     pt, shp, shp_verts, act_state, act_verts, va, vb, out) -> np.ndarray:
     """Release whole parts wherever a window of ``acc`` holds one; return (released, failed).
 
@@ -219,6 +220,14 @@ def release_windows(acc: np.ndarray, ranges: np.ndarray, w: int, ox: float, oy: 
         vy = vel[vj, vi, 1]
         ok = False
         k = offsets.shape[0]
+        # the parts near the window, so most candidates are refused without a full check
+        reach = d * (np.abs(offsets).max() + 1.0) + 2.0 * pt[part_type, PT_BRAD]
+        n = counters[C_N]
+        m = 0
+        for q in range(n):
+            if abs(P[P_X, q] - x) < reach and abs(P[P_Y, q] - y) < reach:
+                near[m] = q
+                m += 1
         for o in range(k):
             oi = (o + rot[0]) % k
             along = offsets[oi, 0]
@@ -229,6 +238,17 @@ def release_windows(acc: np.ndarray, ranges: np.ndarray, w: int, ox: float, oy: 
                 break
             px = x + d * (along * tx + outw * nx_)
             py = y + d * (along * ty + outw * ny_)
+            clear = True
+            for e in range(m):
+                q = near[e]
+                rr = pt[part_type, PT_BRAD] + pt[ptype[q], PT_BRAD]
+                ddx = P[P_X, q] - px
+                ddy = P[P_Y, q] - py
+                if ddx * ddx + ddy * ddy < rr * rr:
+                    clear = False
+                    break
+            if not clear:
+                continue  # bounding circles overlap: refused without the full check
             pid = place(part_type, px, py, 0.0, vx, vy, 0.0, counters, ids, ptype, P, pt, shp,
                         shp_verts, act_state, act_verts, va, vb, out)
             if pid != 0:

@@ -140,6 +140,7 @@ class ScaleCoupling:
         self.step_index = 0
         self.max_residual = 0.0
         self._mask = np.zeros(self.micro.state.capacity, dtype=np.bool_)
+        self._near = np.zeros(self.micro.state.capacity, dtype=np.int64)
         self._cand = np.zeros(5)
         self._tries = MAX_FAILED_PLACEMENTS
         self.barriers: List[MacroBarrier] = []
@@ -257,7 +258,7 @@ class ScaleCoupling:
         w, h = region.w, region.sim.grid.h
         res = _ho.release_windows(acc, ranges, w, ox, oy, h, vel, region.offsets, 2.0 * self.radius
                                   + _CLEARANCE, nx_, ny_, False, self._tries, self._cand,
-                                  region.rot,
+                                  region.rot, self._near,
                                   self.part_type, s.counters, s.ids, s.part_type, s.P, m.pt,
                                   m.shapes, m.shape_verts, m.act_state, m.act_verts, m._va,
                                   m._vb, m._out)
