@@ -5,6 +5,7 @@ Every step's duration (the twin's step and everything its listeners do, e.g. pub
 recorded in :attr:`Runner.stats`; in realtime a step that ends after its deadline is an overrun.
 """
 
+import os
 import sys
 import threading
 import time
@@ -16,6 +17,23 @@ from conveyor_twin.coord.twin import Twin
 # GIL switch interval while a realtime loop runs [s]: Python's 5 ms default lets another thread
 # (the ROS executor serving a service or a command) hold the GIL for up to 5 steps.
 REALTIME_SWITCH_INTERVAL = 2e-4
+# SCHED_FIFO priority of the realtime stepping thread (1-99; 0 or no permission: normal
+# scheduling). Other processes on a loaded machine then cannot stall a step for tens of ms;
+# the kernel's RT throttling (95 % by default) keeps the machine usable. Override with the
+# environment variable below.
+REALTIME_PRIORITY = 10
+PRIORITY_ENV = 'CONVEYOR_TWIN_RT_PRIORITY'
+
+
+def raise_thread_priority(priority: int) -> int:
+    """Put the calling thread under SCHED_FIFO at ``priority``; return it, or 0 if refused."""
+    if priority <= 0 or not hasattr(os, 'sched_setscheduler'):
+        return 0
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, ValueError):
+        return 0
+    return priority
 
 
 class Runner:
@@ -41,6 +59,7 @@ class Runner:
         self._thread: Optional[threading.Thread] = None
         self.wall_start = 0.0
         self.wall_end = 0.0
+        self.priority = 0  # SCHED_FIFO priority the realtime thread got (0: normal)
 
     @property
     def overruns(self) -> int:
@@ -70,6 +89,8 @@ class Runner:
         switch_interval = sys.getswitchinterval()
         if realtime:
             sys.setswitchinterval(REALTIME_SWITCH_INTERVAL)
+            self.priority = raise_thread_priority(
+                int(os.environ.get(PRIORITY_ENV, REALTIME_PRIORITY)))
         self.pacer.restart()
         try:
             while not self._stop.is_set():

@@ -122,6 +122,7 @@ class CoordinatorNode(Node):
             'step_time_max_ms': f"{window['max_ms']:.4f}",
             'overruns': str(self.runner.overruns),
             'real_time_factor': f'{self.runner.real_time_factor():.4f}',
+            'realtime_priority': str(self.runner.priority),
             'rejected_commands': str(self.twin.commands.rejected_total),
             'last_rejection': self.twin.commands.last_rejection,
         }
@@ -300,6 +301,7 @@ class CoordinatorNode(Node):
             'step_time_ms': {k[:-3]: round(v, 4) for k, v in total.items()},
             'overruns': self.runner.overruns,
             'real_time_factor': round(self.runner.real_time_factor(), 4),
+            'realtime_priority': self.runner.priority,
             'rejected_commands': self.twin.commands.rejected_total,
             **self._counters(),
         }
