@@ -1,5 +1,6 @@
 """``conveyor-twin replay`` as a child process, listened to by a raw probe in this process."""
 
+import pathlib
 import subprocess
 import sys
 import time
@@ -196,3 +197,22 @@ def test_clock_is_synthesised_from_log_times(tmp_path, ros_context, executor, ro
     stamps = [stamp_ns('header', d) for d in probe.data(BELT)]
     assert stamps == [t for _, t, _ in sent]
     assert is_subsequence(clock, stamps) and len(clock) >= 0.9 * len(stamps)
+
+
+def test_replay_of_a_reference_bag(ros_context, executor, ros_processes):
+    """bags/default_4s.mcap (a ``run --record`` recording) replays byte for byte."""
+    path = pathlib.Path(__file__).resolve().parents[2] / 'bags' / 'default_4s.mcap'
+    start = next(reader.read_messages(str(path))).log_time + 3_500_000_000  # from the first
+    expected = {topic: [m.data for m in reader.read_messages(str(path), topics=[topic])
+                        if m.log_time >= start]
+                for topic in (BELT, '/light_barrier_edges', '/parts')}
+    assert len(expected[BELT]) == 500 and expected['/light_barrier_edges']
+    probe = start_probe(executor, ros_context, ['belt_states', 'light_barrier_edges', 'parts',
+                                                '/clock'])
+    process = replay(ros_processes, path, '--start-offset', '3.5', '--topics', 'belt_states',
+                     'light_barrier_edges', 'parts')
+    spin_until(executor, lambda: all(probe.count(t) >= len(d) for t, d in expected.items()),
+               START_TIMEOUT + 10)
+    finish(executor, process)
+    for topic, data in expected.items():
+        assert probe.data(topic) == data, topic
