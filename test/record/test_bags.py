@@ -254,3 +254,18 @@ def test_resimulate_refuses_what_it_cannot_rerun(tmp_path):
         result = subprocess.run([sys.executable, '-m', 'conveyor_twin.cli', 'resimulate',
                                  str(path)], capture_output=True, text=True, timeout=120)
         assert result.returncode == 2 and why in result.stderr, result.stderr
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('fraction', [0.3, 0.77])
+def test_resimulate_a_truncated_recording_compares_what_is_left(tmp_path, ros_context,
+                                                                fraction):
+    from conveyor_twin.ros.resimulate import resimulate
+    data = (BAGS_DIR / 'default_markers_2s.mcap').read_bytes()
+    path = tmp_path / 'cut.mcap'
+    path.write_bytes(data[:int(len(data) * fraction)])
+    report = resimulate(str(path), context=ros_context)
+    assert report.ok and not report.complete_source, str(report.difference)
+    left = sum(1 for m in reader.read_messages(str(path), linear=True)
+               if m.topic in EVERY_STEP)
+    assert 0 < sum(report.compared[t] for t in EVERY_STEP) == left
