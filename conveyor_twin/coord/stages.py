@@ -89,13 +89,15 @@ class MicroStage:
         Edges of barriers in macro zones come last, with part id 0.
         """
         c = self.coupling
-        if c is None or not c.macro_edges:
+        if c is None or not c.barriers:
             return self._edges
         ev = c.macro_edges
         idx = np.array([e[0] for e in ev], dtype=np.int64)
         blocked = np.array([e[1] for e in ev], dtype=bool)
-        t = np.rint(np.array([e[2] for e in ev]) * 1e9).astype(np.int64)
+        t = np.rint(np.array([e[2] for e in ev], dtype=float) * 1e9).astype(np.int64)
         b, k, tt, p = self._edges
+        own = ~np.isin(b, c.macro_barrier_index)  # barriers in macro zones: macro edges only
+        b, k, tt, p = b[own], k[own], tt[own], p[own]
         return (np.concatenate([b, idx]), np.concatenate([k, blocked]),
                 np.concatenate([tt, t]), np.concatenate([p, np.zeros(len(ev), np.uint32)]))
 
