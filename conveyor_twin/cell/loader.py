@@ -409,12 +409,28 @@ def cell_from_mapping(data: Any, source_file: str = '<memory>') -> Cell:
     micro = _micro(top.section('micro'))
     macro = _macro(top.section('macro'))
     top.done()
+    _check_macro_barriers(source_file, barriers, zones)
     if not zones:
         x0, y0, x1, y1 = _belts_bounds(belts)
         zones = (Zone(name='all', policy='micro', region=(x0, y0, x1, y1), resolution=0.01),)
     return Cell(source_file=source_file, settings=settings, belts=belts, obstacles=obstacles,
                 part_types=part_types, sources=sources, sinks=sinks, light_barriers=barriers,
                 actuators=actuators, zones=zones, micro=micro, macro=macro)
+
+
+def _check_macro_barriers(file: str, barriers: Sequence[LightBarrier],
+                          zones: Sequence[Zone]) -> None:
+    """Barriers inside a ``macro`` zone are modelled on its grid: they must run along x or y."""
+    for k, b in enumerate(barriers):
+        mx, my = 0.5 * (b.start[0] + b.end[0]), 0.5 * (b.start[1] + b.end[1])
+        for z in zones:
+            x0, y0, x1, y1 = z.region
+            if z.policy != 'macro' or not (x0 <= mx <= x1 and y0 <= my <= y1):
+                continue
+            if abs(b.start[0] - b.end[0]) > 1e-9 and abs(b.start[1] - b.end[1]) > 1e-9:
+                raise CellError(file, f'light_barriers[{k}].end', list(b.end),
+                                f'a beam along x or y (start {list(b.start)}): it lies in '
+                                f'macro zone {z.name!r}, where only such beams are modelled')
 
 
 def _belts_bounds(belts: Sequence[Belt]) -> Rect:

@@ -253,3 +253,12 @@ def test_reset_rebinds_the_coupling_to_the_new_simulators() -> None:
     assert coupling.ledger()['entered'] == 0.0
     twin.step(3500)
     assert coupling.ledger()['captured'] > 0 and abs(coupling.ledger()['residual']) <= 1e-9
+
+
+def test_an_oblique_beam_in_a_macro_zone_is_a_cell_error() -> None:
+    from conveyor_twin.cell.errors import CellError
+    d = yaml.safe_load(default_cell_text())
+    d['zones'] = MID_MACRO
+    d['light_barriers'][0]['end'] = [2.1, 0.25]
+    with pytest.raises(CellError, match=r'light_barriers\[0\]\.end.*macro zone'):
+        cell_from_mapping(d, 'oblique.yaml')
