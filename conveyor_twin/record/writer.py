@@ -32,7 +32,7 @@ import json
 import os
 import threading
 import time
-from typing import Any, Deque, Dict, Iterable, List, Mapping, Optional, Tuple
+from typing import Any, Callable, Deque, Dict, Iterable, List, Mapping, Optional, Tuple
 
 from mcap.well_known import MessageEncoding, SchemaEncoding
 
@@ -123,7 +123,8 @@ class McapRecorder:
                  decimation: Optional[Mapping[str, int]] = None,
                  cell_yaml: Optional[str] = None, seed: Optional[int] = None,
                  step_ns: Optional[int] = None,
-                 metadata: Optional[Mapping[str, str]] = None) -> None:
+                 metadata: Optional[Mapping[str, str]] = None,
+                 on_thread_start: Optional[Callable[[], Any]] = None) -> None:
         """Open the file, write header, metadata and attachments, and start the writer thread.
 
         :param path: output file (``.mcap``); overwritten if it exists.
@@ -138,6 +139,8 @@ class McapRecorder:
         :param seed: seed of the run.
         :param step_ns: simulation step [ns] (to map command log times back to steps).
         :param metadata: further key/value pairs of the ``conveyor_twin`` metadata record.
+        :param on_thread_start: called first in the writer thread (e.g. to raise its scheduling
+            priority, so that a busy machine cannot delay the timed flush).
         :raises RecordingError: if the file cannot be created or an option is invalid.
         """
         if compression not in _COMPRESSIONS:
@@ -172,6 +175,7 @@ class McapRecorder:
         self._sim_mark: Optional[int] = None
         self._by_index: List[_Topic] = []
         self.stats = RecorderStats(self.path)
+        self._on_thread_start = on_thread_start
         self._info = {'version': __version__, 'library': LIBRARY,
                       'seed': '' if seed is None else str(int(seed)),
                       'step_ns': '' if step_ns is None else str(int(step_ns)),
@@ -308,6 +312,11 @@ class McapRecorder:
             t.stats.recorded += 1
 
     def _run(self) -> None:
+        if self._on_thread_start is not None:
+            try:
+                self._on_thread_start()
+            except Exception:  # noqa: BLE001 - a refused priority changes no data
+                pass
         next_flush = time.monotonic() + self._flush_spacing if self._flush_period \
             else float('inf')
         try:

@@ -259,12 +259,20 @@ def start_recording(composed: Any, args: argparse.Namespace, *, seed: int,
         step_ns=composed.twin.dt_ns,
         metadata={'recorded_by': 'conveyor-twin run', 'namespace': namespace,
                   'markers_rate': repr(float(args.markers_rate)), 'mode': mode,
-                  'cell_file': args.cell or '', 'commands': ' '.join(args.command)})
+                  'cell_file': args.cell or '', 'commands': ' '.join(args.command)},
+        on_thread_start=_writer_priority if mode == 'realtime' else None)
     try:
         return TwinRecording(composed, recorder)
     except BaseException:
         recorder.close()
         raise
+
+
+def _writer_priority() -> None:
+    """Give the writer thread the priority of the twin's other helper threads (realtime): the
+    timed flush, which bounds what a kill loses, must not wait for other processes."""
+    from conveyor_twin.coord.runner import raise_thread_priority, realtime_priority
+    raise_thread_priority(realtime_priority(helper=True))
 
 
 def format_recording(s: Dict[str, Any]) -> str:
