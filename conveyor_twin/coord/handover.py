@@ -262,3 +262,12 @@ def release_windows(acc: np.ndarray, ranges: np.ndarray, w: int, ox: float, oy: 
             continue
         cur[1] += 1
     return res
+
+
+@njit(cache=True)
+def deposit_many(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: float, oy: float,
+                 h: float, x: np.ndarray, y: np.ndarray, types: np.ndarray,
+                 radius_of_type: np.ndarray) -> None:
+    """Deposit one part's worth for every ``(x[k], y[k])`` [m] (:func:`deposit_disc`, in order)."""
+    for k in range(x.size):
+        deposit_disc(rho, active, solid, ox, oy, h, x[k], y[k], radius_of_type[types[k]], 1.0)

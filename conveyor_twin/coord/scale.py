@@ -141,6 +141,9 @@ class ScaleCoupling:
         self.max_residual = 0.0
         self._mask = np.zeros(self.micro.state.capacity, dtype=np.bool_)
         self._near = np.zeros(self.micro.state.capacity, dtype=np.int64)
+        # footprint radius of each part type [m]: the disc of equal area
+        self._radius_of_type = np.array([math.sqrt(p.footprint_area / math.pi)
+                                         for p in cell.part_types])
         self._cand = np.zeros(5)
         self._tries = MAX_FAILED_PLACEMENTS
         self.barriers: List[MacroBarrier] = []
@@ -199,17 +202,10 @@ class ScaleCoupling:
         if count == 0:
             return
         parts = micro.remove(mask=mask)
-        rho, solid = sim.density, sim.solid
-        radii = self._radii(parts.part_type)
-        for k in range(count):
-            _ho.deposit_disc(rho, region.active, solid, g.origin_x, g.origin_y, g.h,
-                             float(parts.x[k]), float(parts.y[k]), radii[k], 1.0)
+        _ho.deposit_many(sim.density, region.active, sim.solid, g.origin_x, g.origin_y, g.h,
+                         parts.x, parts.y, parts.part_type, self._radius_of_type)
         sim.parts_deposited += float(count)
         self.captured += count
-
-    def _radii(self, types: np.ndarray) -> np.ndarray:
-        table = np.array([math.sqrt(p.footprint_area / math.pi) for p in self.cell.part_types])
-        return table[types.astype(np.int64)]
 
     def _sinks(self, region: _Region) -> None:
         sim = region.sim
