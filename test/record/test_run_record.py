@@ -98,6 +98,7 @@ def test_selection_decimation_and_drops_are_counted(tmp_path, ros_processes, ros
     (['--record', '/nonexistent/dir/x.mcap'], 'cannot create recording'),
     (['--split', '--record', 'x.mcap'], 'composed layout'),
 ])
-def test_bad_options_are_clear_errors(tmp_path, ros_processes, args, message):
-    code, out, err = run(ros_processes, '--duration', '0.01', *args)
-    assert code == 2 and message in err, err
+def test_bad_options_are_clear_errors(tmp_path, capfd, args, message):
+    from conveyor_twin.cli import run as run_verb
+    code = run_verb.main(['--mode', 'fast', '--quiet', '--duration', '0.01', *args])
+    assert code == 2 and message in capfd.readouterr().err
