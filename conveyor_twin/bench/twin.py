@@ -206,8 +206,9 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
                 '--mode', 'realtime', '--duration', '0', '--json', '--quiet']
     if split:
         twin_cmd.append('--split')
-    twin = subprocess.Popen(twin_cmd, env=env, stdout=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    twin_log = open(os.path.join(directory, 'twin.log'), 'w+')
+    twin = subprocess.Popen(twin_cmd, env=env, stdout=subprocess.PIPE, stderr=twin_log,
+                            text=True, start_new_session=True)
     sub = subprocess.Popen(
         [sys.executable, '-m', 'conveyor_twin.bench.twin', '--subscriber', '--parts',
          str(args.parts), '--duration', str(args.duration), '--settle', str(args.settle),
@@ -219,6 +220,7 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
                 result = json.loads(line[len(RESULT_PREFIX):])
         sub.wait(60)
     finally:
+        ended_early = twin.poll() is not None
         os.killpg(twin.pid, signal.SIGINT)
         try:
             out, _ = twin.communicate(timeout=60)
@@ -230,6 +232,12 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
         if line.startswith('{'):
             summary = json.loads(line)
     figures: Dict[str, object] = {'layout': 'split' if split else 'composed'}
+    twin_log.seek(0)
+    log = twin_log.read()
+    twin_log.close()
+    if ended_early or 'error' in log.lower():
+        figures['twin_ended_early'] = ended_early
+        figures['twin_log_tail'] = log[-2000:]
     if result is None:
         figures['error'] = 'the subscriber process gave no result'
         return figures
@@ -260,6 +268,9 @@ def _print(figures: Dict[str, object]) -> None:
           f"window) {figures.get('step_time_p99_ms_max')} ms, max "
           f"{figures.get('step_time_max_ms_max')} ms")
     print(f"  twin summary: {figures.get('twin_summary')}")
+    if 'twin_log_tail' in figures:
+        print(f"  twin ended early: {figures['twin_ended_early']}; its log ends:\n"
+              + figures['twin_log_tail'])
 
 
 def main(argv: List[str]) -> int:

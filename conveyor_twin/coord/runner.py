@@ -25,6 +25,14 @@ REALTIME_PRIORITY = 10
 PRIORITY_ENV = 'CONVEYOR_TWIN_RT_PRIORITY'
 
 
+def realtime_priority(helper: bool = False) -> int:
+    """Return the SCHED_FIFO priority for the stepping thread, or for a helper thread (one
+    below: the executor and markers threads, so that other processes cannot preempt them while
+    they hold the GIL the stepping thread waits for)."""
+    priority = int(os.environ.get(PRIORITY_ENV, REALTIME_PRIORITY))
+    return max(priority - 1, 0) if helper else priority
+
+
 def raise_thread_priority(priority: int) -> int:
     """Put the calling thread under SCHED_FIFO at ``priority``; return it, or 0 if refused."""
     if priority <= 0 or not hasattr(os, 'sched_setscheduler'):
@@ -89,8 +97,7 @@ class Runner:
         switch_interval = sys.getswitchinterval()
         if realtime:
             sys.setswitchinterval(REALTIME_SWITCH_INTERVAL)
-            self.priority = raise_thread_priority(
-                int(os.environ.get(PRIORITY_ENV, REALTIME_PRIORITY)))
+            self.priority = raise_thread_priority(realtime_priority())
         self.pacer.restart()
         try:
             while not self._stop.is_set():

@@ -14,7 +14,7 @@ from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException
 
 from conveyor_twin.cell.model import Cell
-from conveyor_twin.coord.runner import Runner
+from conveyor_twin.coord.runner import raise_thread_priority, realtime_priority, Runner
 from conveyor_twin.coord.stages import MacroStage, MicroStage
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.coord.twin import Twin
@@ -77,6 +77,8 @@ class ComposedTwin:
                                            parameter_overrides=overrides)
         self.twin.step_listeners.append(lambda inp, _: self.micro_node.publish_step(inp))
         self.twin.step_listeners.append(lambda inp, _: self.macro_node.publish_step(inp))
+        if mode is TimeMode.REALTIME:
+            self.micro_node.markers_priority = realtime_priority(helper=True)
         self.executor = make_executor(context)
         for node in (self.coordinator, self.micro_node, self.macro_node):
             self.executor.add_node(node)
@@ -94,6 +96,8 @@ class ComposedTwin:
                 **{f'macro_{k}': v for k, v in macro.items()}}
 
     def _spin(self) -> None:
+        if self.runner.mode is TimeMode.REALTIME:
+            raise_thread_priority(realtime_priority(helper=True))
         spin_until(self.executor, self._stop_spin)
 
     def start(self) -> None:

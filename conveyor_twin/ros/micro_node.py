@@ -13,6 +13,7 @@ from conveyor_twin_msgs.msg import LightBarrierEdge, LightBarrierStates, PartSta
 import numpy as np
 from visualization_msgs.msg import MarkerArray
 
+from conveyor_twin.coord.runner import raise_thread_priority
 from conveyor_twin.coord.stages import MicroStage
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.ros.markers import CellMarkers
@@ -44,6 +45,7 @@ class MicroNode(ScaleNode):
         self._pub_edge = raw_publish(self.edge_pub)
         self._pub_markers = raw_publish(self.markers_pub)
         self._markers_due = None
+        self.markers_priority = 0  # SCHED_FIFO priority of the markers thread (0: normal)
         self._markers_closed = False
         self._markers_wake = threading.Event()
         self._markers_thread = None
@@ -73,9 +75,12 @@ class MicroNode(ScaleNode):
 
     def _markers_loop(self) -> None:
         """Build and publish the latest due MarkerArray (viewer rate, off the step thread)."""
+        applied = 0
         while True:
             self._markers_wake.wait()
             self._markers_wake.clear()
+            if self.markers_priority != applied:  # set by the composed twin in realtime
+                applied = raise_thread_priority(self.markers_priority) or self.markers_priority
             due, self._markers_due = self._markers_due, None
             if self._markers_closed:
                 return
