@@ -18,23 +18,24 @@ penetration below 10 % of the radius, no part faster than twice the belt, none t
 The penalty model's stiffness is first picked by activity (seed 001, springs <= 1 % of the
 least active physical element).
 
-Measured on the shared 2-core machine (numba 0.68, pymunk 7.3.1, 1500 warm-up + 1000 timed
-steps, load average about 2.7 from other work: pymunk ran about 2x slower than the peer figure
-of architecture.md, so absolute times are inflated; ratios are the robust figures):
+Measured on the shared 2-core machine (numba 0.68, pymunk 7.3.1, 2000 warm-up + 2000 timed
+steps, two runs at load averages of about 1.2 and 4 from other work; wall medians, pymunk's
+``space.step`` alone; ratios by mean and by thread-CPU median):
 
-=====  ======================  ==========================  ===============
-N      ours mean / p99 [ms]    pymunk step (total) [ms]    pymunk / ours
-=====  ======================  ==========================  ===============
-100    0.074 / 0.170           0.169 (0.252)               2.3x (3.4x)
-1000   0.585 / 4.51            2.335 (2.615)               4.0x (4.5x)
-5000   2.752 / 6.85            25.5 (27.3)                 9.3x (9.9x)
-=====  ======================  ==========================  ===============
+=====  ===========================  ======================  ==========================
+N      ours median / mean [ms]      pymunk step median      pymunk / ours
+=====  ===========================  ======================  ==========================
+100    0.030-0.043 / 0.049-0.136    0.10-0.13               2.5-3.0x (CPU 2.7-3.2x)
+1000   0.28-0.36 / 0.30-0.91        3.4-10.8 (CPU 3.3-4.0)  11.6-17x (CPU 11.7-12.4x)
+5000   1.9-2.2 / 2.3-2.9            27-35                   11-25x (CPU 13-18x)
+=====  ===========================  ======================  ==========================
 
-Deepest overlap in the jam: 0.12 mm (N=100), 0.14 mm (N=1000), 0.48 mm (N=5000), slop 0.1 mm.
+The kernel's own cycle counts (uncontended minimum) put N = 1000 at ~0.24 ms per step.
+Deepest overlap in the jam: 0.12 mm (N=100), 0.17 mm (N=1000), 0.39 mm (N=5000), slop 0.1 mm.
 Largest stable/accurate step, N = 100, 0.3 s: impulse 1e-3 s (2e-3 s overlaps 2.3 mm); penalty
-2e-4 s with k = 1e5 N/m picked by activity (springs/least active physical element = 0.0046);
-the penalty limit scales as 1/sqrt(k), so the seed's steel-like stiffness (~1e8-1e9 N/m)
-lands near its ~1e-6 s.
+2e-4 s with k = 1e5 N/m picked by activity (springs/least active physical element = 0.0046),
+2e-6 s with the seed's steel-like k = 1e9 N/m (:data:`SEED_STIFFNESS`; 5e-6 s blows up), i.e.
+500x against the seed's ~1000x; the penalty limit scales as 1/sqrt(k) (2e-5 s at 1e7 N/m).
 """
 
 import argparse
