@@ -287,11 +287,17 @@ def _fixed(i, ptype, x, y, yaw, pt, va, vb, nb, rb, bvx, bvy, bw, bpx, bpy, e, m
 
 
 @njit(cache=True)
-def build_grid(n, x, y, gpar, gdim, cell_start, cell_items, part_cell):
-    """Bin parts 0..n-1 by centre into the uniform grid (counting sort, index order per cell).
+def build_grid(n, x, y, gpar, gdim, cell_table, cell_next, part_cell):
+    """Bin parts 0..n-1 by centre into the uniform grid: one linked list per cell, index order.
+
+    Costs O(n), not O(cells): a cell's list is valid only if its mark is this call's stamp, so
+    no pass over the whole grid clears it (a long belt has ~10^5-10^6 cells).
 
     :param gpar: (x0, y0, h): grid origin and cell size [m]. :param gdim: (nx, ny).
-    :param cell_start: int64[nx*ny + 1] output; ``cell_items``/``part_cell`` int64[capacity].
+    :param cell_table: int64[2*cells + 1], updated: ``[0, cells)`` the first part of each cell
+        (-1: none), ``[cells, 2*cells)`` the stamp of the call that wrote it, ``[2*cells]`` the
+        current stamp. ``cell_next``/``part_cell`` int64[capacity] (output): next part of the
+        same cell (-1: last), cell of each part.
     """
     x0 = gpar[0]
     y0 = gpar[1]
@@ -299,34 +305,33 @@ def build_grid(n, x, y, gpar, gdim, cell_start, cell_items, part_cell):
     gnx = gdim[0]
     gny = gdim[1]
     ncell = gnx * gny
-    for c in range(ncell + 1):
-        cell_start[c] = 0
-    for i in range(n):
+    stamp = cell_table[2 * ncell] + 1
+    cell_table[2 * ncell] = stamp
+    for i in range(n - 1, -1, -1):  # pushed front-first: every list ascends in part index
         cx = int(math.floor((x[i] - x0) * inv_h)) if x[i] == x[i] else 0
         cy = int(math.floor((y[i] - y0) * inv_h)) if y[i] == y[i] else 0
         cx = min(max(cx, 0), gnx - 1)
         cy = min(max(cy, 0), gny - 1)
         c = cy * gnx + cx
         part_cell[i] = c
-        cell_start[c + 1] += 1
-    for c in range(ncell):
-        cell_start[c + 1] += cell_start[c]
-    # fill using cell_items as the output and part order as the tie-break
-    for i in range(n):
-        c = part_cell[i]
-        # cursor: cell_start[c] is advanced, restored below
-        cell_items[cell_start[c]] = i
-        cell_start[c] += 1
-    for c in range(ncell - 1, 0, -1):
-        cell_start[c] = cell_start[c - 1]
-    cell_start[0] = 0
+        if cell_table[ncell + c] != stamp:
+            cell_table[ncell + c] = stamp
+            cell_table[c] = -1
+        cell_next[i] = cell_table[c]
+        cell_table[c] = i
+
+
+def grid_table(cells: int) -> np.ndarray:
+    """Return the ``cell_table`` of :func:`build_grid` for a grid of ``cells`` cells."""
+    return np.zeros(2 * cells + 1, dtype=np.int64)
 
 
 @njit(cache=True)
-def detect(n, ptype, x, y, yaw, pt, gdim, cell_start, cell_items, part_cell, static_start,
+def detect(n, ptype, x, y, yaw, pt, gdim, cell_table, cell_next, part_cell, static_start,
            static_items, shp, shp_verts, act_state, act_verts, cand, va, vb, out, ct, cidx):
     """Record every contact of parts 0..n-1 in the canonical order; return how many.
 
+    :param cell_table, cell_next, part_cell: the grid as :func:`build_grid` left it.
     :param shp: static shape table (S, SH_COLUMNS); ``shp_verts`` (V, 2) their cores [m].
     :param act_state: actuator table (A, AS_COLUMNS); ``act_verts`` (A, 4, 2) their cores.
     :param static_start: int64[cells + 1], ``static_items``: the static shapes of each cell.
@@ -336,6 +341,8 @@ def detect(n, ptype, x, y, yaw, pt, gdim, cell_start, cell_items, part_cell, sta
     """
     gnx = gdim[0]
     gny = gdim[1]
+    ncell = gnx * gny
+    stamp = cell_table[2 * ncell]
     nc = 0
     for i in range(n):
         bri = pt[ptype[i], PT_BRAD]
@@ -348,21 +355,24 @@ def detect(n, ptype, x, y, yaw, pt, gdim, cell_start, cell_items, part_cell, sta
         gx0 = max(cx - 1, 0)
         gx1 = min(cx + 1, gnx - 1)
         for gy in range(max(cy - 1, 0), min(cy + 2, gny)):
-            # the three cells of a row are contiguous in cell_items
             row = gy * gnx
-            for k in range(cell_start[row + gx0], cell_start[row + gx1 + 1]):
-                j = cell_items[k]
-                dx = x[j] - xi
-                dy = y[j] - yi
-                rr = bri + pt[ptype[j], PT_BRAD]
-                if j > i and dx * dx + dy * dy < rr * rr:
-                    # insertion sort by j: canonical order
-                    p = m
-                    while p > 0 and cand[p - 1] > j:
-                        cand[p] = cand[p - 1]
-                        p -= 1
-                    cand[p] = j
-                    m += 1
+            for c9 in range(row + gx0, row + gx1 + 1):
+                if cell_table[ncell + c9] != stamp:
+                    continue  # empty since the last build
+                j = cell_table[c9]
+                while j >= 0:
+                    dx = x[j] - xi
+                    dy = y[j] - yi
+                    rr = bri + pt[ptype[j], PT_BRAD]
+                    if j > i and dx * dx + dy * dy < rr * rr:
+                        # insertion sort by j: canonical order whatever order cells are read
+                        p = m
+                        while p > 0 and cand[p - 1] > j:
+                            cand[p] = cand[p - 1]
+                            p -= 1
+                        cand[p] = j
+                        m += 1
+                    j = cell_next[j]
         ti = ptype[i]
         disc_i = pt[ti, PT_SHAPE] == SHAPE_DISC
         for p in range(m):

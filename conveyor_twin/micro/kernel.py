@@ -87,7 +87,7 @@ def _substeps(n, ptype, P, pt, apar, act_v, cfg):
 
 @njit(cache=True)
 def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, apar, act_v,
-              act_state, act_verts, gpar, gdim, cell_start, cell_items, part_cell,
+              act_state, act_verts, gpar, gdim, cell_table, cell_next, part_cell,
               static_start, static_items, shp, shp_verts, cand, va, vb, out, ct, cidx, acc,
               src, src_next, src_state, rng, sinks, sink_count, region, ob_id, ob_type, ob_P,
               lb, blocked, edge_count, last_part, ev_i, ev_f):
@@ -152,8 +152,8 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
                     fx[i] = 0.0
                     fy[i] = 0.0
                     tz[i] = 0.0
-            build_grid(n, x, y, gpar, gdim, cell_start, cell_items, part_cell)
-            nc = detect(n, ptype, x, y, yaw, pt, gdim, cell_start, cell_items, part_cell,
+            build_grid(n, x, y, gpar, gdim, cell_table, cell_next, part_cell)
+            nc = detect(n, ptype, x, y, yaw, pt, gdim, cell_table, cell_next, part_cell,
                         static_start, static_items, shp, shp_verts, act_state, act_verts,
                         cand, va, vb, out, ct, cidx)
             if nc == ct.shape[0]:

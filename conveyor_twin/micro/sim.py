@@ -26,7 +26,7 @@ from conveyor_twin.micro.contacts import (A_BELT, A_COLUMNS, A_CONTACT_FRICTION,
                                           A_INERTIA, A_SPRING, MODE_IMPULSE, MODE_PENALTY,
                                           MP_COLUMNS, MP_CORRECTION, MP_DAMPING, MP_DT,
                                           MP_FLOOR_MU, MP_GRAVITY, MP_SLOP, MP_STIFFNESS, MP_TRACK,
-                                          scratch)
+                                          grid_table, scratch)
 from conveyor_twin.micro.drive import belt_table, BT_DV, FLOOR_FRICTION
 from conveyor_twin.micro.errors import CapacityError, SpawnOverlapError
 from conveyor_twin.micro.geometry import build_grid, obstacle_shapes, world_bounds
@@ -164,8 +164,8 @@ class MicroSim:
         # contacts are all detected before any body moves: no margin needed
         self.grid = build_grid(bounds, max_brad, 1e-9, self.shapes)
         cap = self.state.capacity
-        self._cell_start = np.zeros(self.grid.cells + 1, dtype=np.int64)
-        self._cell_items = np.zeros(cap, dtype=np.int64)
+        self._cell_table = grid_table(self.grid.cells)
+        self._cell_next = np.zeros(cap, dtype=np.int64)
         self._part_cell = np.zeros(cap, dtype=np.int64)
         self._W = np.zeros((5, cap))
         self._cand, self._va, self._vb, self._out, self._ct, self._cidx = scratch(cap)
@@ -194,8 +194,8 @@ class MicroSim:
         s = self.state
         self._args = (s.counters, s.ids, s.part_type, s.P, self._W, self.pt, self.mp, self.cfg,
                       self.belts, self.belt_v, self.apar, self.act_v, self.act_state,
-                      self.act_verts, self.grid.gpar, self.grid.gdim, self._cell_start,
-                      self._cell_items, self._part_cell, self.grid.static_start,
+                      self.act_verts, self.grid.gpar, self.grid.gdim, self._cell_table,
+                      self._cell_next, self._part_cell, self.grid.static_start,
                       self.grid.static_items, self.shapes, self.shape_verts, self._cand,
                       self._va, self._vb, self._out, self._ct, self._cidx, self.acc,
                       self.src, self.src_next, self.src_state, self.rng, self.sinks,

@@ -74,10 +74,10 @@ def test_impulse_sweeps_match_reference():
     s = sim.state
     n = s.n
     x, y, yaw, vx, vy, wz = s.P[:6]
-    build_grid(n, x, y, sim.grid.gpar, sim.grid.gdim, sim._cell_start, sim._cell_items,
+    build_grid(n, x, y, sim.grid.gpar, sim.grid.gdim, sim._cell_table, sim._cell_next,
                sim._part_cell)
-    nc = detect(n, s.part_type, x, y, yaw, sim.pt, sim.grid.gdim, sim._cell_start,
-                sim._cell_items, sim._part_cell, sim.grid.static_start, sim.grid.static_items,
+    nc = detect(n, s.part_type, x, y, yaw, sim.pt, sim.grid.gdim, sim._cell_table,
+                sim._cell_next, sim._part_cell, sim.grid.static_start, sim.grid.static_items,
                 sim.shapes, sim.shape_verts, sim.act_state, sim.act_verts, sim._cand, sim._va,
                 sim._vb, sim._out, sim._ct, sim._cidx)
     assert nc >= 5
