@@ -39,7 +39,10 @@ def test_every_published_stream_and_the_commands_are_recorded(tmp_path, ros_proc
     for topic in EVERY_STEP:
         assert info['topics'][topic]['count'] == rec['topics'][topic]['recorded'] == 1000
     markers = info['topics']['/markers']['count']
-    assert 25 <= markers <= 31  # ~30 Hz of sim time
+    # at most one per 1/30 s of sim time; the micro node builds them off the stepping thread and
+    # publishes only the latest due one, so fast mode on a busy machine skips some (which ones
+    # depends on the wall clock; resimulate below checks each recorded one is a due one)
+    assert 0 < markers <= 31
     assert info['topics']['/diagnostics']['count'] == 1
     commands = [(m.topic, m.log_time // DT_NS, m.data)
                 for m in reader.read_messages(str(path), topics=[ACCEPTED_BELT_COMMANDS,
