@@ -47,6 +47,13 @@ from ..wire.typehash import type_hash
 ACCEPTED_BELT_COMMANDS = '/conveyor_twin/accepted/belt_command'
 #: Topic of the accepted actuator commands (ActuatorCommand CDR, log time = effective step time).
 ACCEPTED_ACTUATOR_COMMANDS = '/conveyor_twin/accepted/actuator_command'
+#: Topic of the accepted ``spawn_parts`` calls (SpawnParts request CDR, log time = the time of
+#: the last step done when the parts were placed, before the next step).
+ACCEPTED_SPAWNS = '/conveyor_twin/accepted/spawn_parts'
+#: Topic of the accepted ``reset`` calls (Reset request CDR, log time = the time before reset).
+ACCEPTED_RESETS = '/conveyor_twin/accepted/reset'
+_CALL_TYPES = {ACCEPTED_SPAWNS: 'conveyor_twin_msgs/srv/SpawnParts_Request',
+               ACCEPTED_RESETS: 'conveyor_twin_msgs/srv/Reset_Request'}
 #: Default chunk size [bytes] (uncompressed), as rosbag2's MCAP plugin uses.
 DEFAULT_CHUNK_SIZE = 768 * 1024
 #: Default wall-time flush period [s].
@@ -268,11 +275,15 @@ class McapRecorder:
     def record_accepted_command(self, kind: str, effective_time_ns: int, data: bytes) -> None:
         """Record an accepted command (never dropped).
 
-        :param kind: ``'belt'`` or ``'actuator'``.
+        :param kind: ``'belt'``, ``'actuator'``, ``'spawn'`` (a ``spawn_parts`` call) or
+            ``'reset'``.
         :param effective_time_ns: simulation time of the step at which it took effect [ns].
         :param data: the BeltCommand/ActuatorCommand CDR bytes.
         """
-        topic = {'belt': ACCEPTED_BELT_COMMANDS, 'actuator': ACCEPTED_ACTUATOR_COMMANDS}[kind]
+        topic = {'belt': ACCEPTED_BELT_COMMANDS, 'actuator': ACCEPTED_ACTUATOR_COMMANDS,
+                 'spawn': ACCEPTED_SPAWNS, 'reset': ACCEPTED_RESETS}[kind]
+        if topic not in self._topics:  # service calls: a channel only in runs that made them
+            self.add_topic(topic, _CALL_TYPES[topic], essential=True)
         self.record(topic, effective_time_ns, data)
 
     def queued(self) -> int:

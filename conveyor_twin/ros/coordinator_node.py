@@ -9,7 +9,7 @@ report the step done before the next one, so both layouts produce the same bytes
 import json
 import threading
 import time
-from typing import Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 from builtin_interfaces.msg import Time
 from conveyor_twin_msgs.msg import ActuatorCommand, ActuatorStates, BeltCommand, BeltStates
@@ -81,6 +81,9 @@ class CoordinatorNode(Node):
         self.create_service(Reset, 'reset', self._on_reset)
         self.create_service(SpawnParts, 'spawn_parts', self._on_spawn)
         self._remote_roles = tuple(remote_roles)
+        #: Called with (kind 'spawn' or 'reset', sim time before it [ns], the request) for every
+        #: successful ``spawn_parts``/``reset`` call, under the twin's lock (the recorder).
+        self.call_listeners: List[Callable[[str, int, Any], None]] = []
         self._done: Dict[int, int] = {role: 0 for role in self._remote_roles}  # replies seen
         self._replies: Dict[int, tuple] = {}  # role -> (step, reply bytes) of the last reply
         self._step_replies: Dict[int, bytes] = {}
@@ -237,12 +240,15 @@ class CoordinatorNode(Node):
                                 'needs a restart of the twin (the published arrays would change)')
             return response
         with self.twin.lock:
+            before_ns = self.twin.time_ns
             self.twin.reset(cell, int(request.seed))
             if self._remote_roles:
                 payload = coupling.RESET + int(request.seed).to_bytes(8, 'little') + \
                     (request.cell_file or '').encode()
                 self._send_and_wait(payload, 0)
             self.runner.pacer.restart()
+            for listener in self.call_listeners:
+                listener('reset', before_ns, request)
         response.success = True
         response.message = f'reset to step 0 with seed {request.seed} ({cell.settings.name})'
         return response
@@ -274,6 +280,8 @@ class CoordinatorNode(Node):
                     ids = self._spawn_remote(type_index, x, y, yaw)
                 else:
                     ids = self._spawn(type_index, x, y, yaw)
+                for listener in self.call_listeners:
+                    listener('spawn', self.twin.time_ns, request)
         except ValueError as exc:
             response.success, response.message = False, str(exc)
             return response

@@ -145,11 +145,22 @@ class TwinRecording:
             recorder.add_topic(topic, spec.type_name, qos=spec.qos)
             self._stamp[topic] = spec.stamp
         twin.step_listeners.append(self._on_step)
+        composed.coordinator.call_listeners.append(self._on_call)
 
     def _on_step(self, inp: Any, commands: List[Command]) -> None:
         for command in commands:
             self.recorder.record_accepted_command(command.kind, inp.time_ns,
                                                   encode_command(command))
+
+    def _on_call(self, kind: str, time_ns: int, request: Any) -> None:
+        """Record an accepted ``spawn_parts`` or ``reset`` call at the time it happened."""
+        if kind == 'spawn':
+            data = cdr.encode_spawn_request(request.part_type, request.x, request.y,
+                                            request.yaw if len(request.yaw) else
+                                            [0.0] * len(request.x))
+        else:
+            data = cdr.encode_reset_request(request.cell_file, request.seed)
+        self.recorder.record_accepted_command(kind, time_ns, data)
 
     def close(self) -> Dict[str, Any]:
         """Close the file (after the twin stopped); return the per-topic counters.

@@ -15,21 +15,22 @@ depends on the wall clock; the re-run builds the markers of every due step on th
 thread with the same :class:`~conveyor_twin.ros.markers.CellMarkers` and the recorded ones
 must be among them, byte for byte. ``diagnostics`` are not compared: they carry wall-clock step
 times. Parts placed through the
-``spawn_parts`` service and ``reset`` calls are not recorded, so a recording that used them does
-not re-simulate.
+``spawn_parts`` service are recorded with the step after which they were placed and placed again
+at that point; a recording with a ``reset`` call is refused (the run's time restarts at 0).
 """
 
 from collections import Counter, deque
 from dataclasses import dataclass, field
 import math
-from typing import Any, Deque, Dict, Optional, Tuple
+from typing import Any, Deque, Dict, List, Optional, Tuple
 
 from conveyor_twin.cell import CellError, load_cell_text
 from conveyor_twin.coord.commands import CommandRejected
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.record import reader
 from conveyor_twin.record.errors import RecordingError
-from conveyor_twin.record.writer import ACCEPTED_ACTUATOR_COMMANDS, ACCEPTED_BELT_COMMANDS
+from conveyor_twin.record.writer import (ACCEPTED_ACTUATOR_COMMANDS, ACCEPTED_BELT_COMMANDS,
+                                         ACCEPTED_RESETS, ACCEPTED_SPAWNS)
 from conveyor_twin.wire import cdr
 from conveyor_twin.wire.schemas import SCHEMAS
 
@@ -65,6 +66,7 @@ class ResimReport:
     path: str
     steps: int = 0
     commands: int = 0
+    spawns: int = 0
     compared: Dict[str, int] = field(default_factory=Counter)
     skipped: Dict[str, int] = field(default_factory=Counter)
     complete_source: bool = True
@@ -79,7 +81,7 @@ class ResimReport:
         """Return the report as plain data (JSON)."""
         d = self.difference
         return {'path': self.path, 'ok': self.ok, 'steps': self.steps,
-                'commands': self.commands, 'compared': dict(self.compared),
+                'commands': self.commands, 'spawns': self.spawns, 'compared': dict(self.compared),
                 'compared_total': sum(self.compared.values()),
                 'not_compared': dict(self.skipped), 'complete_source': self.complete_source,
                 'difference': None if d is None else {**vars(d), 'text': str(d)}}
@@ -193,8 +195,9 @@ def resimulate(path: str, *, context: Any) -> ResimReport:
             raise RecordingError(f'{path}: metadata step_ns {step_ns} differs from the step of '
                                  f'cell.yaml ({twin.twin.dt_ns} ns)')
         _schedule(path, twin, step_ns, report)
+        spawns = _spawns(path, cell, step_ns, report)
         markers = _build_markers(twin, cell, markers_rate)
-        _compare(path, twin, tap, step_ns, report, markers)
+        _compare(path, twin, tap, step_ns, report, markers, spawns)
     finally:
         twin.stop()
     return report
@@ -219,6 +222,31 @@ def _schedule(path: str, twin: Any, step_ns: int, report: ResimReport) -> None:
         report.commands += 1
 
 
+def _spawns(path: str, cell: Any, step_ns: int,
+            report: ResimReport) -> Dict[int, List[Tuple[int, Any, Any, Any]]]:
+    """Return the recorded ``spawn_parts`` calls by the step after which they were placed.
+
+    :raises RecordingError: for a recorded ``reset`` (not re-simulable) or a malformed call.
+    """
+    for m in reader.read_messages(path, topics=[ACCEPTED_RESETS], linear=True):
+        raise RecordingError(f'{path}: the run was reset (call #{m.sequence} at log time '
+                             f'{m.log_time} ns); runs with reset calls cannot be re-simulated')
+    calls: Dict[int, List[Tuple[int, Any, Any, Any]]] = {}
+    for m in reader.read_messages(path, topics=[ACCEPTED_SPAWNS], linear=True):
+        try:
+            name, x, y, yaw = cdr.decode_spawn_request(m.data)
+            type_index = cell.part_type_index(name)
+        except (cdr.CdrError, KeyError) as exc:
+            raise RecordingError(f'{path}: recorded spawn_parts call #{m.sequence} cannot be '
+                                 f'applied: {exc}') from None
+        if m.log_time % step_ns or m.log_time < 0:
+            raise RecordingError(f'{path}: recorded spawn_parts call #{m.sequence} has log '
+                                 f'time {m.log_time} ns, not a step time (step {step_ns} ns)')
+        calls.setdefault(m.log_time // step_ns, []).append((type_index, x, y, yaw))
+        report.spawns += 1
+    return calls
+
+
 def _build_markers(twin: Any, cell: Any, markers_rate: float) -> Dict[int, bytes]:
     """Build the MarkerArray of every due step on the stepping thread; return {stamp: bytes}."""
     from conveyor_twin.ros.markers import CellMarkers
@@ -241,7 +269,8 @@ def _build_markers(twin: Any, cell: Any, markers_rate: float) -> Dict[int, bytes
 
 
 def _compare(path: str, twin: Any, tap: Any, step_ns: int, report: ResimReport,
-             markers: Dict[int, bytes]) -> None:
+             markers: Dict[int, bytes],
+             spawns: Dict[int, List[Tuple[int, Any, Any, Any]]]) -> None:
     produced: Dict[str, Deque[Tuple[int, bytes]]] = {}
     counters: Counter = Counter()
 
@@ -252,13 +281,15 @@ def _compare(path: str, twin: Any, tap: Any, step_ns: int, report: ResimReport,
     specs = tap(twin, sink, forward=False)
     namespace = twin.coordinator.get_namespace()
     ignored = {t for t, s in specs.items() if s.name in NOT_COMPARED}
-    ignored |= {ACCEPTED_BELT_COMMANDS, ACCEPTED_ACTUATOR_COMMANDS}
+    accepted = {ACCEPTED_BELT_COMMANDS, ACCEPTED_ACTUATOR_COMMANDS, ACCEPTED_SPAWNS,
+                ACCEPTED_RESETS}
+    ignored |= accepted
     core = twin.twin
     # a closed file is read through its index (CRCs checked: damage is an error, never a
     # silent skip); a killed one linearly, as recover() would
     for m in reader.read_messages(path, linear=not report.complete_source):
         if m.topic in ignored:
-            if m.topic not in (ACCEPTED_BELT_COMMANDS, ACCEPTED_ACTUATOR_COMMANDS):
+            if m.topic not in accepted:
                 report.skipped[m.topic] += 1
             continue
         step = m.log_time // step_ns
@@ -276,6 +307,8 @@ def _compare(path: str, twin: Any, tap: Any, step_ns: int, report: ResimReport,
                 queue.popleft()
             if queue or core.step_index > limit:
                 break
+            for type_index, x, y, yaw in spawns.pop(core.step_index, ()):
+                twin.coordinator._spawn(type_index, x, y, yaw)
             core.step(1)
             report.steps = core.step_index
             for other in produced.values():  # keep memory bounded on topics not recorded

@@ -648,6 +648,45 @@ def decode_actuator_command(data: bytes) -> Tuple[str, float]:
     return _decode_command(data, 'ActuatorCommand')
 
 
+def encode_spawn_request(part_type: str, x: Sequence[float], y: Sequence[float],
+                         yaw: Sequence[float]) -> bytes:
+    """Return the CDR bytes of a SpawnParts request; poses [m], [rad]."""
+    b = _Builder()
+    b.string(part_type)
+    for values in (x, y, yaw):
+        b.u32(len(values))
+        for v in values:
+            b.f64(float(v))
+    return b.message()
+
+
+def decode_spawn_request(data: bytes) -> Tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    """Decode a SpawnParts request.
+
+    :return: ``(part_type, x, y, yaw)``, poses [m], [rad].
+    :raises CdrError: on malformed data.
+    """
+    r = _Reader(data, 'SpawnParts_Request')
+    return r.string(), r.array('f8'), r.array('f8'), r.array('f8')
+
+
+def encode_reset_request(cell_file: str, seed: int) -> bytes:
+    """Return the CDR bytes of a Reset request."""
+    b = _Builder()
+    b.string(cell_file)
+    b.u64(int(seed))
+    return b.message()
+
+
+def decode_reset_request(data: bytes) -> Tuple[str, int]:
+    """Decode a Reset request: ``(cell_file, seed)``.
+
+    :raises CdrError: on malformed data.
+    """
+    r = _Reader(data, 'Reset_Request')
+    return r.string(), r.scalar('Q')
+
+
 def decode_clock(data: bytes) -> int:
     """Decode a rosgraph_msgs/Clock message and return its time [ns].
 

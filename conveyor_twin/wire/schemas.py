@@ -69,6 +69,20 @@ _LIGHTBARRIEREDGE = (
     ' 0: edge from the macro scale\n'
 )
 
+#: Request part of ``srv/SpawnParts`` (recorded as the accepted ``spawn_parts`` calls).
+_SPAWNPARTS_REQUEST = (
+    'string part_type    # part type name from the cell description\n'
+    "float64[] x         # cell-frame x of each part's centre of mass [m]\n"
+    "float64[] y         # cell-frame y of each part's centre of mass [m]\n"
+    "float64[] yaw       # orientation of each part about +z [rad]\n"
+)
+
+#: Request part of ``srv/Reset`` (recorded as the accepted ``reset`` calls).
+_RESET_REQUEST = (
+    'string cell_file    # path of the cell YAML file; empty: keep the current cell\n'
+    'uint64 seed         # random seed for sources and sampling\n'
+)
+
 _BELTCOMMAND = (
     "# Set the target speed of one belt (applied ramped by the belt's acceleration limit).\n"
     '\n'
@@ -403,6 +417,8 @@ MSG_TEXTS: Dict[str, str] = {
     'conveyor_twin_msgs/msg/BeltStates': _BELTSTATES,
     'conveyor_twin_msgs/msg/ActuatorCommand': _ACTUATORCOMMAND,
     'conveyor_twin_msgs/msg/ActuatorStates': _ACTUATORSTATES,
+    'conveyor_twin_msgs/srv/SpawnParts_Request': _SPAWNPARTS_REQUEST,
+    'conveyor_twin_msgs/srv/Reset_Request': _RESET_REQUEST,
     'std_msgs/msg/Header': _HEADER,
     'builtin_interfaces/msg/Time': _TIME,
     'rosgraph_msgs/msg/Clock': _CLOCK,
@@ -414,7 +430,7 @@ MSG_TEXTS: Dict[str, str] = {
 
 #: Type names of the interface package of the contract.
 CONTRACT_TYPES: Tuple[str, ...] = tuple(
-    name for name in MSG_TEXTS if name.startswith('conveyor_twin_msgs/'))
+    name for name in MSG_TEXTS if name.startswith('conveyor_twin_msgs/msg/'))
 
 PRIMITIVES = frozenset((
     'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16', 'int32',

@@ -94,3 +94,11 @@ def test_type_hash_known_value():
     # std_msgs/msg/Header of Jazzy/Kilted (share/std_msgs/msg/Header.json)
     assert type_hash('std_msgs/msg/Header') == (
         'RIHS01_f49fb3ae2cf070f793645ff749683ac6b06203e41c891e17701b1cb597ce6a01')
+
+
+@pytest.mark.parametrize('name', ['SpawnParts', 'Reset'])
+def test_recorded_service_requests_equal_msg_defs(name):
+    path = MSG_DEFS.parent / 'srv' / f'{name}.srv'
+    request = path.read_text().split('---')[0]
+    assert significant_lines(schemas.MSG_TEXTS[f'conveyor_twin_msgs/srv/{name}_Request']) == \
+        significant_lines(request)
