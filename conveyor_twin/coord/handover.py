@@ -44,6 +44,21 @@ def capture_mask(x: np.ndarray, y: np.ndarray, n: int, ox: float, oy: float, h: 
 
 
 @njit(cache=True)
+def _covered_samples(i: int, j: int, ox: float, oy: float, h: float, px: float, py: float,
+                     r2: float, s: int) -> int:
+    """Return how many of the s x s sample points of cell (i, j) lie in the disc of squared
+    radius ``r2`` [m^2] at ``(px, py)`` [m]."""
+    w = 0
+    for a in range(s):
+        yy = oy + (j + (a + 0.5) / s) * h - py
+        for b in range(s):
+            xx = ox + (i + (b + 0.5) / s) * h - px
+            if xx * xx + yy * yy <= r2:
+                w += 1
+    return w
+
+
+@njit(cache=True)
 def deposit_disc(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: float, oy: float,
                  h: float, px: float, py: float, radius: float, amount: float) -> None:
     """Add ``amount`` parts over the disc of ``radius`` [m] at ``(px, py)`` [m], exactly.
@@ -62,14 +77,7 @@ def deposit_disc(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: flo
         for i in range(max(0, ic - rc), min(nx, ic + rc + 1)):
             if not active[j, i] or solid[j, i]:
                 continue
-            w = 0
-            for a in range(s):
-                yy = oy + (j + (a + 0.5) / s) * h - py
-                for b in range(s):
-                    xx = ox + (i + (b + 0.5) / s) * h - px
-                    if xx * xx + yy * yy <= r2:
-                        w += 1
-            total += w
+            total += _covered_samples(i, j, ox, oy, h, px, py, r2, s)
     inv = 1.0 / (h * h)
     if total > 0.0:
         scale = amount * inv / total
@@ -77,13 +85,7 @@ def deposit_disc(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: flo
             for i in range(max(0, ic - rc), min(nx, ic + rc + 1)):
                 if not active[j, i] or solid[j, i]:
                     continue
-                w = 0
-                for a in range(s):
-                    yy = oy + (j + (a + 0.5) / s) * h - py
-                    for b in range(s):
-                        xx = ox + (i + (b + 0.5) / s) * h - px
-                        if xx * xx + yy * yy <= r2:
-                            w += 1
+                w = _covered_samples(i, j, ox, oy, h, px, py, r2, s)
                 if w:
                     rho[j, i] += scale * w
         return

@@ -3,76 +3,40 @@
 import math
 
 from conveyor_twin_msgs.msg import ActuatorCommand, BeltCommand
-from conveyor_twin_msgs.srv import Reset, SpawnParts, Step
+from conveyor_twin_msgs.srv import Reset, SpawnParts
 import numpy as np
 import pytest
 import yaml
-from rclpy.duration import Duration
-from rclpy.executors import SingleThreadedExecutor
 
 from conveyor_twin.cell import cell_from_mapping, default_cell_text, load_cell
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.ros.compose import ComposedTwin
-from conveyor_twin.ros.qos import COMMAND_QOS
 from conveyor_twin.wire import cdr
-from test.ros.probe import Probe
+from test.ros.twin_driver import Driver
 from test.ros_env import wait_for
 
 pytestmark = pytest.mark.ros
 TIMEOUT = 30.0
 
 
-class Harness:
-    """A composed twin in lockstep plus a probe and a controller in the test's executor."""
+class Harness(Driver):
+    """A composed twin in lockstep driven by a :class:`Driver` in the test's executor."""
 
     def __init__(self, context, *, seed: int = 7, cell=None) -> None:
         self.twin = ComposedTwin(cell or load_cell(), seed=seed, mode=TimeMode.LOCKSTEP,
                                  context=context, markers_rate=0.0)
         self.twin.start()
-        self.probe = Probe(context)
-        self.executor = SingleThreadedExecutor(context=context)
-        self.executor.add_node(self.probe)
-        self.step_client = self.probe.create_client(Step, 'step')
-        self.spawn_client = self.probe.create_client(SpawnParts, 'spawn_parts')
-        self.reset_client = self.probe.create_client(Reset, 'reset')
-        self.belt_pub = self.probe.create_publisher(BeltCommand, 'belt_command', COMMAND_QOS)
-        self.actuator_pub = self.probe.create_publisher(ActuatorCommand, 'actuator_command',
-                                                        COMMAND_QOS)
-        assert wait_for(lambda: self.probe.matched() and self.step_client.service_is_ready()
-                        and self.belt_pub.get_subscription_count() > 0
-                        and self.actuator_pub.get_subscription_count() > 0,
-                        TIMEOUT, self.executor), 'twin not discovered'
-
-    def call(self, client, request):
-        future = client.call_async(request)
-        self.executor.spin_until_future_complete(future, timeout_sec=TIMEOUT)
-        assert future.done(), 'service call timed out'
-        return future.result()
-
-    def step(self, n: int, chunk: int = 50) -> Step.Response:
-        """Advance n steps in calls of at most ``chunk`` (the streams keep the last 100)."""
-        while True:
-            k = min(n, chunk)
-            before = {t: len(v) for t, v in self.probe.received.items()}
-            response = self.call(self.step_client, Step.Request(steps=k))
-            # every reliable stream delivers all k messages of the call
-            assert wait_for(lambda: all(len(self.probe.received[t]) >= before[t] + k
-                                        for t in ('parts', 'light_barriers', 'belt_states',
-                                                  'actuator_states')),
-                            TIMEOUT, self.executor)
-            n -= k
-            if n <= 0:
-                return response
+        super().__init__(context)
+        assert self.wait_connected(), 'twin not discovered'
 
     def command(self, publisher, msg) -> None:
-        publisher.publish(msg)
-        # acknowledged by the twin's reader before the next step request is even sent, so the
-        # twin's executor handles the command before that request
-        assert publisher.wait_for_all_acked(Duration(seconds=TIMEOUT))
+        """Publish on ``publisher`` (the one of msg's type) and wait for the twin's ack."""
+        assert publisher is (self.belt_pub if isinstance(msg, BeltCommand) else
+                             self.actuator_pub)
+        super().command(msg)
 
     def close(self) -> None:
-        self.executor.remove_node(self.probe)
-        self.probe.destroy_node()
+        super().close()
         self.twin.stop()
 
 
