@@ -13,6 +13,8 @@ macro now) and the grid's ``solid`` mask (1: obstacle or engaged actuator).
   :func:`window_subtract` removes one part from it (proportionally, so nothing goes negative).
 """
 
+import math
+
 from numba import njit
 import numpy as np
 
@@ -117,6 +119,55 @@ def take_inactive(rho: np.ndarray, active: np.ndarray, h: float, acc: np.ndarray
 
 
 @njit(cache=True)
+def hold_back(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, vel: np.ndarray, ox: float,
+              oy: float, h: float, rho_max: float, x: np.ndarray, y: np.ndarray, n: int,
+              occ: np.ndarray) -> None:
+    """Push density in inactive cells back upstream where the micro parts leave no room.
+
+    The macro solver does not see micro parts, so density flowing into a micro tile that is
+    full (a micro jam) would pile up on top of them. Here the room of an inactive cell is
+    ``rho_max h^2`` minus its micro part centres; mass beyond it moves to the upstream
+    neighbour (against the larger component of the cell velocity ``vel`` ``(ny, nx, 2)``
+    [m/s]), sweeping against the flow so it can travel several cells back to the macro
+    cells in one call. Mass moves only within the grid: the total is unchanged. ``occ``
+    ``(ny, nx)`` is scratch (micro parts per cell).
+    """
+    ny, nx = rho.shape
+    occ[:, :] = 0.0
+    for k in range(n):
+        fx = (x[k] - ox) / h
+        fy = (y[k] - oy) / h
+        if fx < 0.0 or fy < 0.0 or fx >= nx or fy >= ny:
+            continue
+        occ[int(fy), int(fx)] += 1.0
+    hh = h * h
+    for jr in range(ny):
+        for ir in range(nx):
+            # downstream first for flow along +x / +y (the belt's usual direction)
+            j = ny - 1 - jr
+            i = nx - 1 - ir
+            if active[j, i] or rho[j, i] <= 0.0:
+                continue
+            room = max(0.0, rho_max * hh - occ[j, i])
+            m = rho[j, i] * hh
+            if m <= room:
+                continue
+            vx = vel[j, i, 0]
+            vy = vel[j, i, 1]
+            if vx == 0.0 and vy == 0.0:
+                continue
+            if abs(vx) >= abs(vy):
+                jj, ii = j, i - (1 if vx > 0.0 else -1)
+            else:
+                jj, ii = j - (1 if vy > 0.0 else -1), i
+            if jj < 0 or ii < 0 or jj >= ny or ii >= nx or solid[jj, ii]:
+                continue
+            excess = (m - room) / hh
+            rho[j, i] -= excess
+            rho[jj, ii] += excess
+
+
+@njit(cache=True)
 def take_mask(rho: np.ndarray, mask: np.ndarray, h: float) -> float:
     """Remove the mass of the cells where ``mask`` is set; return it [parts]."""
     ny, nx = rho.shape
@@ -131,15 +182,18 @@ def take_mask(rho: np.ndarray, mask: np.ndarray, h: float) -> float:
 
 
 @njit(cache=True)
-def window_candidate(acc: np.ndarray, ranges: np.ndarray, cur: np.ndarray, w: int,
-                     threshold: float, out: np.ndarray) -> bool:
+def window_candidate(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.ndarray,
+                     cur: np.ndarray, w: int, threshold: float, thr: np.ndarray,
+                     out: np.ndarray) -> bool:
     """Find the next cell whose window holds a part, scanning only the cell ranges given.
 
-    ``ranges`` ``(m, 4)`` holds ``(j0, j1, i0, i1)`` blocks of cells to scan (row-major within
-    a block); ``cur`` ``(2,)`` is the cursor (block, flat index in the block) to start from and
-    is left on the cell found. The window is the ``(2 w + 1)^2`` block around the cell. ``out``
-    receives ``(j, i, sum, centroid_j, centroid_i)`` (centroid in cells, mass-weighted).
-    Return False when no window from the cursor on holds ``threshold``.
+    ``acc`` holds mass (``acc * unit`` [parts] per cell); cells where ``skip`` is set are
+    not part of any window (macro cells when ``acc`` is the density). ``ranges`` ``(m, 4)``
+    holds ``(j0, j1, i0, i1)`` blocks of cells to scan (row-major within a block); ``cur``
+    ``(2,)`` is the cursor (block, flat index in the block) to start from and is left on the
+    cell found. The window is the ``(2 w + 1)^2`` block around the cell. ``out`` receives
+    ``(j, i, sum [parts], centroid_j, centroid_i)`` (centroid in cells, mass-weighted).
+    Return False when no window from the cursor on holds ``threshold + thr[j, i]`` [parts].
     """
     ny, nx = acc.shape
     while cur[0] < ranges.shape[0]:
@@ -149,18 +203,20 @@ def window_candidate(acc: np.ndarray, ranges: np.ndarray, cur: np.ndarray, w: in
         for flat in range(cur[1], size):
             j = j0 + flat // bw
             i = i0 + flat - (flat // bw) * bw
-            if acc[j, i] <= 0.0:
+            if acc[j, i] <= 0.0 or skip[j, i]:
                 continue
             total = 0.0
             cj = 0.0
             ci = 0.0
             for jj in range(max(0, j - w), min(ny, j + w + 1)):
                 for ii in range(max(0, i - w), min(nx, i + w + 1)):
-                    a = acc[jj, ii]
+                    if skip[jj, ii]:
+                        continue
+                    a = acc[jj, ii] * unit
                     total += a
                     cj += a * jj
                     ci += a * ii
-            if total >= threshold:
+            if total >= threshold + thr[j, i]:
                 out[0] = j
                 out[1] = i
                 out[2] = total
@@ -174,40 +230,59 @@ def window_candidate(acc: np.ndarray, ranges: np.ndarray, cur: np.ndarray, w: in
 
 
 @njit(cache=True)
-def window_subtract(acc: np.ndarray, j: int, i: int, w: int, total: float,
+def window_subtract(acc: np.ndarray, skip: np.ndarray, j: int, i: int, w: int, total: float,
                     amount: float) -> None:
-    """Remove ``amount`` from the window around ``(j, i)`` holding ``total``, proportionally."""
+    """Remove ``amount`` [parts] from the window around ``(j, i)`` holding ``total``
+    [parts], proportionally (cells where ``skip`` is set are not touched)."""
     ny, nx = acc.shape
     keep = 1.0 - amount / total
     for jj in range(max(0, j - w), min(ny, j + w + 1)):
         for ii in range(max(0, i - w), min(nx, i + w + 1)):
-            acc[jj, ii] *= keep
+            if not skip[jj, ii]:
+                acc[jj, ii] *= keep
 
 
 @njit(cache=True)
-def release_windows(acc: np.ndarray, ranges: np.ndarray, w: int, ox: float, oy: float, h: float,
-                    vel: np.ndarray,
-                    offsets: np.ndarray, d: float, nx_: float, ny_: float, back: bool,
-                    max_fail: int, cand: np.ndarray, rot: np.ndarray, near: np.ndarray,
-                    part_type: int, counters, ids, ptype, P,
+def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.ndarray, w: int,
+                    ox: float, oy: float, h: float, vel: np.ndarray, offsets: np.ndarray,
+                    d: float, nx_: float, ny_: float, along_flow: bool, grid: np.ndarray,
+                    active: np.ndarray, max_fail: int, cand: np.ndarray, rot: np.ndarray,
+                    near: np.ndarray, fifo: np.ndarray, fstate: np.ndarray,
+                    released_by_type: np.ndarray, thr: np.ndarray, rng: np.ndarray, counters,
+                    ids, ptype, P,
                     pt, shp, shp_verts, act_state, act_verts, va, vb, out) -> np.ndarray:
     """Release whole parts wherever a window of ``acc`` holds one; return (released, failed).
 
-    Only the cells of ``ranges`` are scanned (see :func:`window_candidate`).
-    A part goes to ``(ox + (ci + 0.5) h, oy + (cj + 0.5) h)`` [m] (the window's mass centre
-    ``(cj, ci)`` in cells) with the velocity ``vel[round(cj), round(ci)]`` [m/s]; if it would
-    overlap, the ``offsets`` (along, out) in units of ``d`` [m] relative to the outward normal
-    ``(nx_, ny_)`` are tried (negative ``out`` only if ``back``). After ``max_fail`` refused
-    placements the rest waits. ``rot[0]`` rotates the first offset tried from one part to the
-    next (stride 7), so consecutive parts spread over the window. The remaining arguments are
-    those of
+    Only the cells of ``ranges`` are scanned (see :func:`window_candidate`; ``skip`` and
+    ``unit`` as there). A part goes to ``(ox + (ci + 0.5) h, oy + (cj + 0.5) h)`` [m] (the
+    window's mass centre ``(cj, ci)`` in cells) with the velocity ``vel[round(cj), round(ci)]``
+    [m/s]; if it would overlap, the ``offsets`` (along, out) in units of ``d`` [m] relative to
+    the outward direction are tried, ``out >= 0`` only (downstream). The outward direction is
+    ``(nx_, ny_)``, or with ``along_flow`` the direction of the local velocity (``(nx_, ny_)``
+    where it is zero). Spots whose centre lies in an active (macro) cell of the grid
+    (``grid = (x0, y0, h)``, mask ``active``) are refused, so a released part is not captured
+    again. After ``max_fail`` refused placements the rest waits. ``rot[0]`` rotates the first
+    offset tried from one part to the next (stride 7), so consecutive parts spread over the
+    window.
+
+    Part types: ``fifo`` is the zone's ring buffer of the types of the parts deposited,
+    ``fstate = (head, count, untyped)``; each released part takes the type at the head (FIFO
+    per zone); with the buffer empty (mass from a prescribed inflow) type 0, counted in
+    ``untyped``. ``released_by_type`` counts the releases per type.
+
+    Arrival phases: the window around cell ``(j, i)`` releases its next part once it holds
+    ``1 + thr[j, i]`` [parts] (``thr`` shaped like ``acc``); after each release ``thr[j, i]``
+    is redrawn as ``rng[0] * u`` with ``u`` uniform in [0, 1) from the deterministic generator
+    whose state is ``rng[1]`` (see :func:`next_uniform`). So neighbouring windows fed by the
+    same uniform density do not release in lock-step. The remaining arguments are those of
     :func:`conveyor_twin.micro.sources.place`.
     """
     res = np.zeros(2, dtype=np.int64)
     cur = np.zeros(2, dtype=np.int64)
-    tx, ty = -ny_, nx_
+    gnx = active.shape[1]
+    gny = active.shape[0]
     while res[1] < max_fail:
-        if not window_candidate(acc, ranges, cur, w, 1.0, cand):
+        if not window_candidate(acc, skip, unit, ranges, cur, w, 1.0, thr, cand):
             break
         j = int(cand[0])
         i = int(cand[1])
@@ -220,10 +295,22 @@ def release_windows(acc: np.ndarray, ranges: np.ndarray, w: int, ox: float, oy: 
         vi = min(max(int(ci + 0.5), 0), vel.shape[1] - 1)
         vx = vel[vj, vi, 0]
         vy = vel[vj, vi, 1]
+        ex = nx_
+        ey = ny_
+        if along_flow:
+            sp = math.sqrt(vx * vx + vy * vy)
+            if sp > 0.0:
+                ex = vx / sp
+                ey = vy / sp
+        tx, ty = -ey, ex
+        t = 0
+        if fstate[1] > 0:
+            t = fifo[fstate[0]]
+        rt = pt[t, PT_BRAD]
         ok = False
         k = offsets.shape[0]
         # the parts near the window, so most candidates are refused without a full check
-        reach = d * (np.abs(offsets).max() + 1.0) + 2.0 * pt[part_type, PT_BRAD]
+        reach = d * (np.abs(offsets).max() + 1.0) + 2.0 * rt + d
         n = counters[C_N]
         m = 0
         for q in range(n):
@@ -234,16 +321,20 @@ def release_windows(acc: np.ndarray, ranges: np.ndarray, w: int, ox: float, oy: 
             oi = (o + rot[0]) % k
             along = offsets[oi, 0]
             outw = offsets[oi, 1]
-            if outw < 0.0 and not back:
+            if outw < 0.0:
                 continue
             if res[1] >= max_fail:
                 break
-            px = x + d * (along * tx + outw * nx_)
-            py = y + d * (along * ty + outw * ny_)
+            px = x + d * (along * tx + outw * ex)
+            py = y + d * (along * ty + outw * ey)
+            fx = (px - grid[0]) / grid[2]
+            fy = (py - grid[1]) / grid[2]
+            if 0.0 <= fx < gnx and 0.0 <= fy < gny and active[int(fy), int(fx)]:
+                continue
             clear = True
             for e in range(m):
                 q = near[e]
-                rr = pt[part_type, PT_BRAD] + pt[ptype[q], PT_BRAD]
+                rr = rt + pt[ptype[q], PT_BRAD]
                 ddx = P[P_X, q] - px
                 ddy = P[P_Y, q] - py
                 if ddx * ddx + ddy * ddy < rr * rr:
@@ -251,7 +342,7 @@ def release_windows(acc: np.ndarray, ranges: np.ndarray, w: int, ox: float, oy: 
                     break
             if not clear:
                 continue  # bounding circles overlap: refused without the full check
-            pid = place(part_type, px, py, 0.0, vx, vy, 0.0, counters, ids, ptype, P, pt, shp,
+            pid = place(t, px, py, 0.0, vx, vy, 0.0, counters, ids, ptype, P, pt, shp,
                         shp_verts, act_state, act_verts, va, vb, out)
             if pid != 0:
                 ok = True
@@ -259,11 +350,29 @@ def release_windows(acc: np.ndarray, ranges: np.ndarray, w: int, ox: float, oy: 
             res[1] += 1
         rot[0] = (rot[0] + 7) % k
         if ok:
-            window_subtract(acc, j, i, w, total, 1.0)
+            window_subtract(acc, skip, j, i, w, total, 1.0)
             res[0] += 1
+            released_by_type[t] += 1
+            if fstate[1] > 0:
+                fstate[0] = (fstate[0] + 1) % fifo.size
+                fstate[1] -= 1
+            else:
+                fstate[2] += 1
+            if rng[0] > 0.0:
+                thr[j, i] = rng[0] * next_uniform(rng)
             continue
         cur[1] += 1
     return res
+
+
+@njit(cache=True)
+def next_uniform(rng: np.ndarray) -> float:
+    """Advance the generator state ``rng[1]`` (a 48-bit LCG kept exactly in a float64) and
+    return a uniform number in [0, 1)."""
+    s = np.int64(rng[1])
+    s = (s * np.int64(25214903917) + np.int64(11)) & np.int64((1 << 48) - 1)
+    rng[1] = float(s)
+    return float(s >> np.int64(16)) / float(1 << 32)
 
 
 @njit(cache=True)

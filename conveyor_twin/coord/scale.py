@@ -50,6 +50,12 @@ MAX_OFFSETS = 49
 MAX_FAILED_PLACEMENTS = 64
 # Clearance [m] between a released part and the face it crosses.
 _CLEARANCE = 1e-4
+# Arrival spread of released parts [parts]: after each release a window must hold
+# ``1 + RELEASE_SPREAD * u`` before the next part leaves, ``u`` uniform in [0, 1) from a
+# deterministic generator (see the module docstring).
+RELEASE_SPREAD = 0.0
+# Generator state of the first grid's arrival spread (each further grid adds 7919).
+JITTER_SEED = 0x5DEECE66D
 
 
 class BalanceError(RuntimeError):
@@ -68,16 +74,29 @@ class _Region:
             self.active = self.tiles.cell_mask()
         else:
             self.active = np.ones((g.ny, g.nx), dtype=np.uint8)
-        self.acc = np.zeros((g.ny, g.nx))
         self.face_ranges = [np.array([[0, g.ny, 0, 1]]), np.array([[0, g.ny, 0, 1]]),
                             np.array([[0, 1, 0, g.nx]]), np.array([[0, 1, 0, g.nx]])]
         self.update_ranges()
         # boundary faces: left/right (ny, 1), bottom/top (1, nx)
         self.face_acc = [np.zeros((g.ny, 1)), np.zeros((g.ny, 1)), np.zeros((1, g.nx)),
                          np.zeros((1, g.nx))]
+        self.face_skip = [np.zeros(a.shape, dtype=np.uint8) for a in self.face_acc]
+        self.occ = np.zeros((g.ny, g.nx))
         self.w = max(1, int(math.ceil(radius / g.h)))
-        self.offsets = _lattice(0.5 * g.h, 2.0 * radius + _CLEARANCE)
+        # spots over the whole window, so parts can leave side by side at the part spacing
+        self.offsets = _lattice((self.w + 0.5) * g.h, 2.0 * radius + _CLEARANCE)
         self.rot = np.zeros(1, dtype=np.int64)
+        self.grid_box = np.array([g.origin_x, g.origin_y, g.h])
+        # FIFO of the types of the parts deposited: (head, count, untyped releases)
+        self.fifo = np.zeros(1024, dtype=np.int64)
+        self.fstate = np.zeros(3, dtype=np.int64)
+        self.sink_popped = 0  # whole parts of the sink outflow given a type
+        self.left = 0.0  # mass that left through sinks in this grid [parts]
+        # arrival phases of the release windows (see handover.release_windows)
+        self.rng = np.zeros(2)
+        self.face_thr = [np.zeros(a.shape) for a in self.face_acc]
+        self.thr = np.zeros((g.ny, g.nx))
+
         centres, normals = g.boundary_faces()
         self.face_centres, self.face_normals = centres, normals
         xc, yc = g.centres()
@@ -93,6 +112,15 @@ class _Region:
         ny, nx = g.ny, g.nx
         self.sides = [(0, ny), (ny, 2 * ny), (2 * ny, 2 * ny + nx), (2 * ny + nx, 2 * (ny + nx))]
 
+    def seed_phases(self, spread: float, state: int) -> None:
+        """Draw every window's first arrival phase (``spread * u`` [parts], ``u`` uniform
+        from NumPy's PCG64 seeded with ``state``); later draws use the kernel's generator."""
+        self.rng[0] = spread
+        self.rng[1] = float(state % (1 << 48))
+        gen = np.random.default_rng(state)
+        for arr in self.face_thr + [self.thr]:
+            arr[...] = spread * gen.random(arr.shape) if spread > 0.0 else 0.0
+
     def update_ranges(self) -> None:
         """List the cell blocks of the micro tiles (where released mass can wait)."""
         t = self.tiles
@@ -104,9 +132,49 @@ class _Region:
         self.ranges = np.stack([ty * t.tc, np.minimum(g.ny, (ty + 1) * t.tc), tx * t.tc,
                                 np.minimum(g.nx, (tx + 1) * t.tc)], axis=1).astype(np.int64)
 
+    def inactive_mass(self) -> float:
+        """Mass in the cells of micro tiles (flowing on, released as whole parts) [parts]."""
+        if self.tiles is None:
+            return 0.0
+        rho = self.sim.density
+        return float(rho[self.active == 0].sum()) * self.sim.grid.h ** 2
+
     def pending(self) -> float:
-        """Mass waiting in the accumulators [parts]."""
-        return float(self.acc.sum()) + sum(float(a.sum()) for a in self.face_acc)
+        """Mass waiting to be released as whole parts [parts]: the boundary accumulators and
+        the density in the cells of micro tiles."""
+        return self.inactive_mass() + sum(float(a.sum()) for a in self.face_acc)
+
+    def push_types(self, types: np.ndarray) -> None:
+        """Append part types to the FIFO (growing the ring buffer as needed)."""
+        head, count = int(self.fstate[0]), int(self.fstate[1])
+        size = self.fifo.size
+        k = types.size
+        if count + k > size:
+            new = np.zeros(max(2 * size, count + k), dtype=np.int64)
+            new[:count] = np.roll(self.fifo, -head)[:count]
+            self.fifo, head, size = new, 0, new.size
+            self.fstate[0] = 0
+        idx = (head + count + np.arange(k)) % size
+        self.fifo[idx] = types
+        self.fstate[1] = count + k
+
+    def pop_types(self, k: int) -> np.ndarray:
+        """Remove and return the ``k`` oldest types (type 0 for missing ones)."""
+        head, count = int(self.fstate[0]), int(self.fstate[1])
+        take = min(k, count)
+        out = self.fifo[(head + np.arange(take)) % self.fifo.size].copy()
+        self.fstate[0] = (head + take) % self.fifo.size
+        self.fstate[1] = count - take
+        if take < k:
+            self.fstate[2] += k - take
+            out = np.concatenate([out, np.zeros(k - take, dtype=np.int64)])
+        return out
+
+    def types_held(self, n_types: int) -> np.ndarray:
+        """Return the parts per type in the FIFO (deposited, not yet released or sunk)."""
+        head, count = int(self.fstate[0]), int(self.fstate[1])
+        held = self.fifo[(head + np.arange(count)) % self.fifo.size]
+        return np.bincount(held, minlength=n_types)[:n_types]
 
 
 class ScaleCoupling:
@@ -132,8 +200,15 @@ class ScaleCoupling:
         self.cell: Cell = self.micro.cell
         cell = self.cell
         self.part_type = 0
-        self.radius = cell.part_types[0].bounding_radius
+        self.n_types = len(cell.part_types)
+        # the largest part sets the release spacing; the first type the macro barriers' length
+        self.radius = max(p.bounding_radius for p in cell.part_types)
         self.regions = [_Region(cell, sim, self.radius) for sim in self.macro_stage.grids]
+        for k, region in enumerate(self.regions):
+            region.seed_phases(RELEASE_SPREAD, JITTER_SEED + 7919 * k)
+        self.captured_by_type = np.zeros(self.n_types, dtype=np.int64)
+        self.released_by_type = np.zeros(self.n_types, dtype=np.int64)
+        self.left_by_type = np.zeros(self.n_types, dtype=np.int64)
         self.left_macro = 0.0
         self.released = 0
         self.captured = 0
@@ -150,7 +225,8 @@ class ScaleCoupling:
         for index, barrier in enumerate(cell.light_barriers):
             for region in self.regions:
                 if region.tiles is None and _inside(barrier, region.sim):
-                    self.barriers.append(MacroBarrier(index, barrier, region.sim, self.radius))
+                    self.barriers.append(MacroBarrier(index, barrier, region.sim,
+                                                      cell.part_types[0].bounding_radius))
                     break
         self.macro_barrier_index = np.array([b.index for b in self.barriers], dtype=np.int64)
         self.macro_edges: List[Tuple[int, bool, float]] = []
@@ -206,6 +282,9 @@ class ScaleCoupling:
                          parts.x, parts.y, parts.part_type, self._radius_of_type)
         sim.parts_deposited += float(count)
         self.captured += count
+        types = parts.part_type.astype(np.int64)
+        region.push_types(types)
+        self.captured_by_type += np.bincount(types, minlength=self.n_types)[:self.n_types]
 
     def _sinks(self, region: _Region) -> None:
         sim = region.sim
@@ -213,7 +292,17 @@ class ScaleCoupling:
             taken = _ho.take_mask(sim.density, region.sink_cells, sim.grid.h)
             if taken:
                 sim.parts_taken += taken
-                self.left_macro += taken
+                self._left(region, taken)
+
+    def _left(self, region: _Region, amount: float) -> None:
+        """Count ``amount`` [parts] as left through a sink; give whole parts their types."""
+        self.left_macro += amount
+        region.left += amount
+        whole = int(math.floor(region.left)) - region.sink_popped
+        if whole > 0:
+            types = region.pop_types(whole)
+            region.sink_popped += whole
+            self.left_by_type += np.bincount(types, minlength=self.n_types)[:self.n_types]
 
     def _accumulate(self, region: _Region) -> None:
         sim = region.sim
@@ -224,12 +313,18 @@ class ScaleCoupling:
                 continue
             sink = region.face_sink[a:b]
             left = float(seg[sink].sum())
-            self.left_macro += left
+            if left:
+                self._left(region, left)
             region.face_acc[side].reshape(-1)[:] += np.where(sink, 0.0, seg)
         if region.tiles is not None:
-            taken = _ho.take_inactive(sim.density, region.active, sim.grid.h, region.acc)
-            if taken:
-                sim.parts_taken += taken
+            self._hold_back(region)
+
+    def _hold_back(self, region: _Region) -> None:
+        """Keep the density in micro tiles within the room the micro parts leave."""
+        sim, g = region.sim, region.sim.grid
+        v = self.micro.state.P
+        _ho.hold_back(sim.density, region.active, sim.solid, sim.cell_velocity, g.origin_x,
+                      g.origin_y, g.h, sim.rho_max, v[0], v[1], self.micro.n, region.occ)
 
     def _release(self, region: _Region) -> None:
         g = region.sim.grid
@@ -240,24 +335,32 @@ class ScaleCoupling:
                  (x_end + off, g.origin_y, vc[:, -1:], 1.0, 0.0),
                  (g.origin_x, g.origin_y - off - g.h, vc[:1], 0.0, -1.0),
                  (g.origin_x, y_end + off, vc[-1:], 0.0, 1.0))
-        for acc, rng, (ox, oy, vel, nx_, ny_) in zip(region.face_acc, region.face_ranges, sides):
+        for acc, skip, thr, rng, (ox, oy, vel, nx_, ny_) in zip(
+                region.face_acc, region.face_skip, region.face_thr, region.face_ranges, sides):
             if self._tries > 0 and acc.max() >= 1.0 / (2 * region.w + 1):
-                self._release_from(region, acc, rng, ox, oy, vel, nx_, ny_)
+                self._release_from(region, acc, skip, thr, 1.0, rng, ox, oy, vel, nx_, ny_,
+                                   False)
         if region.tiles is not None and self._tries > 0 and region.ranges.shape[0]:
-            self._release_from(region, region.acc, region.ranges, g.origin_x, g.origin_y, vc,
-                               1.0, 0.0)
+            # the density in micro tiles flows on until a window holds a whole part
+            self._release_from(region, region.sim.density, region.active, region.thr, g.h * g.h,
+                               region.ranges, g.origin_x, g.origin_y, vc, 1.0, 0.0, True)
 
-    def _release_from(self, region: _Region, acc: np.ndarray, ranges: np.ndarray, ox: float,
-                      oy: float, vel: np.ndarray, nx_: float, ny_: float) -> None:
+    def _release_from(self, region: _Region, acc: np.ndarray, skip: np.ndarray,
+                      thr: np.ndarray, unit: float,
+                      ranges: np.ndarray, ox: float, oy: float, vel: np.ndarray, nx_: float,
+                      ny_: float, along_flow: bool) -> None:
         m = self.micro
         s = m.state
         w, h = region.w, region.sim.grid.h
-        res = _ho.release_windows(acc, ranges, w, ox, oy, h, vel, region.offsets, 2.0 * self.radius
-                                  + _CLEARANCE, nx_, ny_, False, self._tries, self._cand,
-                                  region.rot, self._near,
-                                  self.part_type, s.counters, s.ids, s.part_type, s.P, m.pt,
-                                  m.shapes, m.shape_verts, m.act_state, m.act_verts, m._va,
-                                  m._vb, m._out)
+        res = _ho.release_windows(acc, skip, unit, ranges, w, ox, oy, h, vel, region.offsets,
+                                  2.0 * self.radius + _CLEARANCE, nx_, ny_, along_flow,
+                                  region.grid_box, region.active, self._tries, self._cand,
+                                  region.rot, self._near, region.fifo, region.fstate,
+                                  self.released_by_type, thr, region.rng, s.counters, s.ids,
+                                  s.part_type, s.P, m.pt, m.shapes, m.shape_verts, m.act_state,
+                                  m.act_verts, m._va, m._vb, m._out)
+        if int(res[0]) and acc is region.sim.density:
+            region.sim.parts_taken += float(res[0])
         self.released += int(res[0])
         self._tries -= int(res[1])
 
@@ -269,18 +372,9 @@ class ScaleCoupling:
         self._apply_tiles(region)
 
     def _apply_tiles(self, region: _Region) -> None:
-        new = region.tiles.cell_mask()
-        turned_macro = (new != 0) & (region.active == 0)
-        if turned_macro.any():
-            # pending mass of cells that turn macro goes back into the density
-            sim = region.sim
-            back = region.acc[turned_macro]
-            sim.density[turned_macro] += back / (sim.grid.h ** 2)
-            sim.parts_deposited += float(back.sum())
-            region.acc[turned_macro] = 0.0
-        region.active[:] = new
+        region.active[:] = region.tiles.cell_mask()
         region.update_ranges()
-        # cells that turned micro give their mass to the accumulators next step
+        # the density of cells that turned micro is released as whole parts from now on
 
     def force_tiles(self, zone: str, macro: np.ndarray) -> None:
         """Set the tile modes of ``auto`` zone ``zone`` now (tests and tools).
@@ -293,19 +387,12 @@ class ScaleCoupling:
                 region.tiles.force(macro, self.step_index)
                 self._apply_tiles(region)
                 self._capture(region)
-                self._accumulate_inactive(region)
                 self._tries = 1 << 30
                 self._release(region)
                 if self.check:
                     self.check_balance()
                 return
         raise KeyError(f'no auto zone named {zone!r}')
-
-    def _accumulate_inactive(self, region: _Region) -> None:
-        sim = region.sim
-        taken = _ho.take_inactive(sim.density, region.active, sim.grid.h, region.acc)
-        if taken:
-            sim.parts_taken += taken
 
     # --- ledger ---
     def ledger(self) -> Dict[str, float]:
@@ -318,14 +405,44 @@ class ScaleCoupling:
         micro_entered = c['entered'] - self.released
         macro_in = sum(r.sim.parts_in for r in self.regions)
         entered = float(micro_entered) + macro_in
-        macro = sum(r.sim.total_parts() for r in self.regions)
+        inactive = sum(r.inactive_mass() for r in self.regions)
+        macro = sum(r.sim.total_parts() for r in self.regions) - inactive
         pending = sum(r.pending() for r in self.regions)
         left = float(c['left']) + self.left_macro
         micro_n = float(c['in_flight'])
         residual = entered - micro_n - macro - pending - left - float(c['handed_over'])
-        return {'entered': entered, 'micro': micro_n, 'macro': macro, 'pending': pending,
-                'left': left, 'residual': residual, 'captured': float(self.captured),
-                'released': float(self.released)}
+        out = {'entered': entered, 'micro': micro_n, 'macro': macro, 'pending': pending,
+               'left': left, 'residual': residual, 'captured': float(self.captured),
+               'released': float(self.released)}
+        # per part type: whole parts held by the macro scale (deposited, not yet released or
+        # sunk) and the type ledger's residual (typed entries vs mass, see check_balance)
+        held = self.types_held()
+        for t, p in enumerate(self.cell.part_types):
+            out[f'macro_{p.name}'] = float(held[t])
+        out['type_residual'] = self._type_residual(held)
+        return out
+
+    def types_held(self) -> np.ndarray:
+        """Return the whole parts per type held by the macro scale (all grids)."""
+        held = np.zeros(self.n_types, dtype=np.int64)
+        for r in self.regions:
+            held += r.types_held(self.n_types)
+        return held
+
+    def _type_residual(self, held: np.ndarray) -> float:
+        """Return ``typed entries - (mass + sink remainder) + inflow - untyped`` [parts].
+
+        Every whole part deposited adds a typed FIFO entry; every part released or sunk
+        removes one. So the entries held equal the mass in the grids and accumulators plus
+        the fraction of a part that left through sinks but was not yet given a type, minus
+        the mass of prescribed inflow, plus the releases that found the FIFO empty.
+        """
+        r = float(held.sum())
+        for reg in self.regions:
+            r -= reg.sim.total_parts() + sum(float(a.sum()) for a in reg.face_acc)
+            r -= reg.left - reg.sink_popped
+            r += reg.sim.parts_in - float(reg.fstate[2])
+        return r
 
     def check_balance(self) -> float:
         """Check the ledger; return the residual [parts].
@@ -334,17 +451,22 @@ class ScaleCoupling:
         """
         led = self.ledger()
         r = led['residual']
-        self.max_residual = max(self.max_residual, abs(r))
-        if not abs(r) <= BALANCE_TOLERANCE:
+        self.max_residual = max(self.max_residual, abs(r), abs(led['type_residual']))
+        if not (abs(r) <= BALANCE_TOLERANCE and abs(led['type_residual']) <= BALANCE_TOLERANCE):
             msg = f'part ledger off by {r:.3e} parts at step {self.step_index}: {led}'
             raise BalanceError(msg)
         return r
 
     def state_bytes(self) -> bytes:
         """Return the coupling's dynamic state (accumulators, masks, counters) as bytes."""
-        parts = [np.array([self.left_macro, self.released, self.captured]).tobytes()]
+        parts = [np.array([self.left_macro, self.released, self.captured]).tobytes(),
+                 self.captured_by_type.tobytes(), self.released_by_type.tobytes(),
+                 self.left_by_type.tobytes()]
         for r in self.regions:
-            parts += [r.active.tobytes(), r.acc.tobytes(), r.rot.tobytes()]
+            parts += [r.active.tobytes(), r.rot.tobytes(), r.fstate.tobytes(),
+                      r.types_held(self.n_types).tobytes(), r.rng.tobytes(),
+                      r.thr.tobytes(),
+                      np.array([r.left, r.sink_popped]).tobytes()]
             parts += [a.tobytes() for a in r.face_acc]
             if r.tiles is not None:
                 parts += [r.tiles.macro.tobytes(), r.tiles.last_switch.tobytes()]

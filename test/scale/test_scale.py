@@ -223,7 +223,6 @@ def _stopper_run(policy: str) -> List[float]:
         q = float((v.x < 1.2).sum())
         if coupling.enabled:
             q += macro.grids[0].region_parts((0.0, -0.25, 1.2, 0.25))
-            q += float(coupling.regions[0].acc[:, :60].sum())
         queue.append(q)
     if policy == 'auto':
         assert coupling.regions[0].tiles.switches > 0
