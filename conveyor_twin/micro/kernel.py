@@ -5,7 +5,8 @@ Each step (the state after step ``k`` is stamped ``k dt``):
 2. sources release the parts due at the step's start;
 3. the pose at the step's start is saved (for light-barrier interpolation);
 4. ``m`` substeps of length ``dt / m``, each: actuator poses interpolated, belt friction on the
-   velocities, broad phase (uniform grid) and near phase (contact records), then either the
+   velocities, broad phase (a neighbour list with a skin, rebuilt on a uniform grid when a part
+   moved too far or parts came or went) and near phase (contact records), then either the
    impulses (velocities), positions ``x += h v`` (semi-implicit Euler) and the penetration
    correction, or the penalty forces (velocities) and ``x += h v``;
 5. light barriers sampled, edges recorded;
@@ -21,9 +22,9 @@ import math
 from numba import njit
 
 from conveyor_twin.micro.actuators import actuator_shapes, AP_LENGTH, AP_WIDTH
-from conveyor_twin.micro.contacts import (A_INERTIA, build_grid, correct_positions, detect,
-                                          MODE_PENALTY, MP_DT, MP_TRACK, penalty_forces,
-                                          solve_impulses)
+from conveyor_twin.micro.contacts import (A_INERTIA, correct_positions, detect, MODE_PENALTY,
+                                          MP_DT, MP_TRACK, penalty_forces, solve_impulses,
+                                          update_pairs)
 from conveyor_twin.micro.drive import belt_drive, belt_key, ramp
 from conveyor_twin.micro.sensors import update_barriers
 from conveyor_twin.micro.sinks import leave
@@ -41,7 +42,8 @@ CF_PENALTY_DT = 4     # largest stable penalty substep [s]
 CF_MAX_SUB = 5        # most substeps per step
 CF_FLOOR_MU = 6
 CF_PASSES = 7         # impulse model: sweeps over the contacts (velocity and position)
-CF_COLUMNS = 8
+CF_SKIN = 8           # neighbour list skin [m] (see contacts.update_pairs)
+CF_COLUMNS = 9
 
 # --- rows of the belt array ``belt_v`` (3, B) ---
 BV_TARGET = 0
@@ -87,10 +89,10 @@ def _substeps(n, ptype, P, pt, apar, act_v, cfg):
 
 @njit(cache=True)
 def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, apar, act_v,
-              act_state, act_verts, gpar, gdim, cell_table, cell_next, part_cell,
+              act_state, act_verts, gpar, gdim, cell_table, cell_items, part_cell,
               static_start, static_items, shp, shp_verts, cand, va, vb, out, ct, cidx, acc,
               src, src_next, src_state, rng, sinks, sink_count, region, ob_id, ob_type, ob_P,
-              lb, blocked, edge_count, last_part, ev_i, ev_f):
+              lb, blocked, edge_count, last_part, ev_i, ev_f, nbr, pos0):
     """Advance ``nsteps`` steps in place (see the module docstring for the arrays' meaning)."""
     dt = cfg[CF_DT]
     mode = int(cfg[CF_MODE])
@@ -108,6 +110,7 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
     key = W[4]
     na = apar.shape[0]
     passes = int(cfg[CF_PASSES])
+    skin = cfg[CF_SKIN]
     for _ in range(nsteps):
         step = counters[C_STEP] + 1
         # 1. actuation
@@ -152,10 +155,11 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
                     fx[i] = 0.0
                     fy[i] = 0.0
                     tz[i] = 0.0
-            build_grid(n, x, y, gpar, gdim, cell_table, cell_next, part_cell)
-            nc = detect(n, ptype, x, y, yaw, pt, gdim, cell_table, cell_next, part_cell,
-                        static_start, static_items, shp, shp_verts, act_state, act_verts,
-                        cand, va, vb, out, ct, cidx)
+            if update_pairs(n, ids, ptype, x, y, pt, gpar, gdim, cell_table, cell_items,
+                            part_cell, cand, nbr, pos0, skin) == 2:
+                counters[C_CONTACTS_FULL] += 1
+            nc = detect(n, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items,
+                        shp, shp_verts, act_state, act_verts, va, vb, out, ct, cidx)
             if nc == ct.shape[0]:
                 counters[C_CONTACTS_FULL] += 1
             if mode == MODE_PENALTY:

@@ -7,9 +7,10 @@ import pytest
 
 from conveyor_twin.micro import MicroSim
 from conveyor_twin.micro.collide import box_vertices, collide
-from conveyor_twin.micro.contacts import (build_grid, CT_BVX, CT_BVY, CT_BW, CT_E, CT_MU_K,
-                                          CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY,
-                                          CT_V_T, detect, solve_impulses)
+from conveyor_twin.micro.contacts import (CT_BVX, CT_BVY, CT_BW, CT_E, CT_MU_K, CT_MU_S,
+                                          CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY, CT_V_T,
+                                          detect, solve_impulses, update_pairs)
+from conveyor_twin.micro.kernel import CF_SKIN
 from conveyor_twin.micro.reference import box_core, collide_ref, sweeps_ref
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
 from test.micro.conftest import box, disc, make_cell, wall
@@ -74,12 +75,12 @@ def test_impulse_sweeps_match_reference():
     s = sim.state
     n = s.n
     x, y, yaw, vx, vy, wz = s.P[:6]
-    build_grid(n, x, y, sim.grid.gpar, sim.grid.gdim, sim._cell_table, sim._cell_next,
-               sim._part_cell)
-    nc = detect(n, s.part_type, x, y, yaw, sim.pt, sim.grid.gdim, sim._cell_table,
-                sim._cell_next, sim._part_cell, sim.grid.static_start, sim.grid.static_items,
-                sim.shapes, sim.shape_verts, sim.act_state, sim.act_verts, sim._cand, sim._va,
-                sim._vb, sim._out, sim._ct, sim._cidx)
+    update_pairs(n, s.ids, s.part_type, x, y, sim.pt, sim.grid.gpar, sim.grid.gdim,
+                 sim._cell_table, sim._cell_items, sim._part_cell, sim._cand, sim._nbr,
+                 sim._pos0, sim.cfg[CF_SKIN])
+    nc = detect(n, s.part_type, x, y, yaw, sim.pt, sim._nbr, sim._part_cell,
+                sim.grid.static_start, sim.grid.static_items, sim.shapes, sim.shape_verts,
+                sim.act_state, sim.act_verts, sim._va, sim._vb, sim._out, sim._ct, sim._cidx)
     assert nc >= 5
     ct, cidx = sim._ct, sim._cidx
     contacts = [dict(a=int(cidx[c, 0]), b=int(cidx[c, 1]), n=ct[c, [CT_NX, CT_NY]],
