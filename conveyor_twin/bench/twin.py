@@ -95,6 +95,9 @@ def subscriber_main(argv: List[str]) -> int:
     from diagnostic_msgs.msg import DiagnosticArray
     from rosgraph_msgs.msg import Clock
 
+    from rclpy.qos import QoSProfile
+
+    from conveyor_twin.coord.runner import freeze_heap
     from conveyor_twin.ros.qos import CLOCK_QOS, COMMAND_QOS, SLOW_QOS, STREAM_QOS
 
     types = {'parts': PartStates, 'light_barriers': LightBarrierStates,
@@ -114,8 +117,12 @@ def subscriber_main(argv: List[str]) -> int:
             log[1].append(int.from_bytes(data[4:8], 'little') * 1_000_000_000
                           + int.from_bytes(data[8:12], 'little'))
 
+    # /clock is offered best-effort, keep-last 1 (the simulator convention); a clock consumer
+    # subscribes with depth 1 and wants only the newest. Here the reader keeps 1000 so that
+    # "lost" counts what the twin did not deliver, not what this reader overwrote.
+    clock_qos = QoSProfile(depth=1000, reliability=CLOCK_QOS.reliability)
     subs = [node.create_subscription(types[t], t, lambda d, log=arrivals[t]: on_raw(d, log),
-                                     CLOCK_QOS if t == '/clock' else STREAM_QOS, raw=True)
+                                     clock_qos if t == '/clock' else STREAM_QOS, raw=True)
             for t in STREAMS]
     subs.append(node.create_subscription(
         DiagnosticArray, 'diagnostics',
@@ -164,6 +171,7 @@ def subscriber_main(argv: List[str]) -> int:
                 break
             indices = np.flatnonzero(keep)[[int(i) for i in refused.group(1).split(',')]]
             keep[indices] = False
+    freeze_heap()  # no full collections of this process's heap during the window
     spin_for(args.settle)
     diagnostics.clear()
     recording[0] = True
@@ -197,6 +205,14 @@ def _window_figures(diagnostics: List[Dict[str, str]]) -> Dict[str, object]:
     }
 
 
+def _signal_group(pid: int, sig: int) -> None:
+    """Send ``sig`` to the twin's process group, if anything of it is left."""
+    try:
+        os.killpg(pid, sig)
+    except ProcessLookupError:
+        pass
+
+
 def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[str, object]:
     """Run the twin in one layout and the subscriber process; return the figures."""
     env = dict(os.environ)
@@ -221,11 +237,11 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
         sub.wait(60)
     finally:
         ended_early = twin.poll() is not None
-        os.killpg(twin.pid, signal.SIGINT)
+        _signal_group(twin.pid, signal.SIGINT)
         try:
             out, _ = twin.communicate(timeout=60)
         except subprocess.TimeoutExpired:
-            os.killpg(twin.pid, signal.SIGKILL)
+            _signal_group(twin.pid, signal.SIGKILL)
             out, _ = twin.communicate()
     summary = None
     for line in out.splitlines():

@@ -9,6 +9,8 @@ import rclpy
 from rclpy.context import Context
 
 from conveyor_twin.cell import CellError, load_cell
+from conveyor_twin.coord.runner import freeze_heap
+from conveyor_twin.coord.warmup import warm_up
 from conveyor_twin.ros.compose import make_executor, spin_until
 from conveyor_twin.ros.params import declare_twin_parameters
 
@@ -45,6 +47,7 @@ def run_scale_node(node_class, stage_class, argv: Optional[List[str]] = None) ->
         return 1
     context, params, cell, seed = started
     stage = stage_class(cell, seed)
+    warm_up(cell, seed)  # load the step kernels now, not during the first steps
     node = node_class(stage, context=context, remote=True, markers_rate=params.markers_rate,
                       step_s=cell.settings.step)
     executor = make_executor(context)
@@ -55,6 +58,7 @@ def run_scale_node(node_class, stage_class, argv: Optional[List[str]] = None) ->
     spin_stop = threading.Event()
     spinner = threading.Thread(target=spin_until, args=(executor, spin_stop), daemon=True)
     spinner.start()
+    freeze_heap()  # no 60-80 ms full collections while stepping
     stop.wait()
     spin_stop.set()
     spinner.join(5.0)
