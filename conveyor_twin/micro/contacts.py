@@ -204,7 +204,7 @@ CT_V_T = 10
 CT_BVX = 11
 CT_BVY = 12
 CT_BW = 13
-# written by the solvers before their sweeps (off the sweeps' dependency chain)
+# written by :func:`prepare_contacts` before the sweeps (off the sweeps' dependency chain)
 CT_IKN = 14           # 1 / normal effective mass [1/kg]
 CT_IKT = 15           # 1 / tangential effective mass [1/kg]
 CT_IKN_S = 16         # the same in the shock sweep (the downstream body fixed)
@@ -215,7 +215,8 @@ CT_WB = 20
 CT_CNT = 21           # change of the tangential speed per unit normal impulse [1/kg]
 CT_CNT_S = 22         # the same in the shock sweep
 CT_FA_S = 23          # shock sweep: 1.0 if a moves (b counts as fixed), 0.0 if b moves
-CT_COLUMNS = 24
+CT_NEG_1PE = 24       # -(1 + e): the normal impulse factor of a bouncing contact
+CT_COLUMNS = 25
 
 
 @njit(cache=True, inline='always')
@@ -585,21 +586,17 @@ def _effective(ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny):
 
 
 @njit(cache=True)
-def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc):
-    """Apply the contacts' impulses in ``passes`` sweeps (canonical order).
+def prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp):
+    """Write the per-contact constants of the impulse and position sweeps (one pass).
 
-    The first sweep is the seed's response, with restitution. Further sweeps are plastic and
-    touch only contacts still closing (so they change nothing for isolated impacts). With
-    ``passes >= 2`` the last sweep is a shock-propagation sweep: of two parts the one further
-    downstream (larger ``key``, its position along its belt's direction [m]) counts as fixed,
-    so a pile pressed by the belt against an obstacle is stopped in one sweep.
-
-    The sweeps are Gauss-Seidel: each contact sees the velocities left by the ones before it,
-    so the per-contact work is a dependency chain. The effective masses (geometry only) are
-    inverted for all contacts first, where the divisions overlap; the sweeps only multiply.
-    Each impulse is that of :func:`impulse_response`.
+    Geometry only, so the divisions happen here, where they overlap, and the sweeps only
+    multiply: the inverse normal and tangential effective masses and the change of the
+    tangential speed per unit normal impulse (also with the downstream body fixed, for the
+    shock sweep), the friction slope, ``-(1 + e)``, which body moves in the shock sweeps
+    (``passes >= 2``; ``key``: position along the belt [m]) and the shares of the position
+    correction (inverse-mass proportion times ``mp[MP_CORRECTION]``).
     """
-    track = mp[MP_TRACK] != 0.0
+    frac = mp[MP_CORRECTION]
     shocking = passes >= 2
     for c in range(nc):
         a = cidx[c, 0]
@@ -636,6 +633,29 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc):
             ct[c, CT_CNT_S] = ct[c, CT_CNT]
         v_t = ct[c, CT_V_T]
         ct[c, CT_SLOPE] = (ct[c, CT_MU_K] - ct[c, CT_MU_S]) / v_t if v_t > 0.0 else 0.0
+        ct[c, CT_NEG_1PE] = -(1.0 + ct[c, CT_E])
+        w = frac / (ima + imb)
+        ct[c, CT_WA] = w * ima
+        ct[c, CT_WB] = w * imb
+
+
+@njit(cache=True)
+def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc):
+    """Apply the contacts' impulses in ``passes`` sweeps (canonical order).
+
+    The first sweep is the seed's response, with restitution. Further sweeps are plastic and
+    touch only contacts still closing (so they change nothing for isolated impacts). With
+    ``passes >= 2`` the last sweep is a shock-propagation sweep: of two parts the one further
+    downstream (larger ``key``, its position along its belt's direction [m]) counts as fixed,
+    so a pile pressed by the belt against an obstacle is stopped in one sweep.
+
+    The sweeps are Gauss-Seidel: each contact sees the velocities left by the ones before it,
+    so the per-contact work is a dependency chain; the records must have been prepared by
+    :func:`prepare_contacts` (the sweeps only multiply). Each impulse is that of
+    :func:`impulse_response`.
+    """
+    track = mp[MP_TRACK] != 0.0
+    shocking = passes >= 2
     for it in range(passes):
         shock = shocking and it == passes - 1
         ikn_col = CT_IKN_S if shock else CT_IKN
@@ -683,8 +703,9 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc):
             ux = (vax - wa * ray) - (vbx - wb * rby)
             uy = (vay + wa * rax) - (vby + wb * rbx)
             un = ux * nx + uy * ny
-            ee = ct[c, CT_E] if first and -un > RESTITUTION_THRESHOLD else 0.0
-            jn = max(-(1.0 + ee) * un * ct[c, ikn_col], 0.0)
+            # -(1 + e) when bouncing, else -1 (the same numbers as -(1 + 0))
+            f = ct[c, CT_NEG_1PE] if first and -un > RESTITUTION_THRESHOLD else -1.0
+            jn = max(f * un * ct[c, ikn_col], 0.0)
             ut = (uy * nx - ux * ny) + jn * ct[c, cnt_col]
             jt = -ut * ct[c, ikt_col]
             speed = abs(ut)
@@ -714,20 +735,11 @@ def correct_positions(nc, ct, cidx, ptype, x, y, x0, y0, pt, passes, key, mp):
     moved since (``x0``, ``y0``: positions at detection); each sweep removes
     ``mp[MP_CORRECTION]`` of the excess over the slop, in inverse-mass proportion; the last of
     ``passes >= 2`` sweeps moves only the upstream part of a pair (see :func:`solve_impulses`).
-    The shares are computed for all contacts before the sweeps (no division in the chain).
+    The shares come from :func:`prepare_contacts` (no division in the chain).
     """
     slop = mp[MP_SLOP]
     frac = mp[MP_CORRECTION]
     shocking = passes >= 2
-    for c in range(nc):
-        a = cidx[c, 0]
-        b = cidx[c, 1]
-        ima = pt[ptype[a], PT_INV_MASS]
-        imb = pt[ptype[b], PT_INV_MASS] if b >= 0 else 0.0
-        w = frac / (ima + imb)
-        ct[c, CT_WA] = w * ima
-        ct[c, CT_WB] = w * imb
-        ct[c, CT_FA_S] = 0.0 if shocking and b >= 0 and key[a] > key[b] else 1.0
     for it in range(passes):
         shock = shocking and it == passes - 1
         # branch-free per contact, as in solve_impulses (no excess: a zero move)

@@ -23,8 +23,8 @@ from numba import njit
 
 from conveyor_twin.micro.actuators import actuator_shapes, AP_LENGTH, AP_WIDTH
 from conveyor_twin.micro.contacts import (A_INERTIA, correct_positions, detect, MODE_PENALTY,
-                                          MP_DT, MP_TRACK, penalty_forces, solve_impulses,
-                                          update_pairs)
+                                          MP_DT, MP_TRACK, penalty_forces, prepare_contacts,
+                                          solve_impulses, update_pairs)
 from conveyor_twin.micro.drive import belt_drive, belt_key, ramp
 from conveyor_twin.micro.sensors import update_barriers
 from conveyor_twin.micro.sinks import leave
@@ -171,6 +171,7 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
                     wz[i] += h * tz[i] * pt[t, PT_INV_INERTIA]
             else:
                 belt_key(n, x, y, belts, key)
+                prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp)
                 solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc)
                 for i in range(n):
                     fx[i] = x[i]

@@ -9,7 +9,8 @@ from conveyor_twin.micro import MicroSim
 from conveyor_twin.micro.collide import box_vertices, collide
 from conveyor_twin.micro.contacts import (CT_BVX, CT_BVY, CT_BW, CT_E, CT_MU_K, CT_MU_S,
                                           CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY, CT_V_T,
-                                          detect, solve_impulses, update_pairs)
+                                          detect, prepare_contacts, solve_impulses,
+                                          update_pairs)
 from conveyor_twin.micro.kernel import CF_SKIN
 from conveyor_twin.micro.reference import box_core, collide_ref, sweeps_ref
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
@@ -93,6 +94,7 @@ def test_impulse_sweeps_match_reference():
     types = s.part_type[:n]
     sweeps_ref(contacts, v, w, sim.pt[types, PT_INV_MASS], sim.pt[types, PT_INV_INERTIA], key,
                passes=3)
+    prepare_contacts(nc, ct, cidx, s.part_type, sim.pt, 3, key, sim.mp)
     solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, key, sim.mp, sim.acc)
     assert vx[:n] == pytest.approx(v[:, 0], abs=1e-12)
     assert vy[:n] == pytest.approx(v[:, 1], abs=1e-12)
