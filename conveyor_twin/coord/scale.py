@@ -5,24 +5,47 @@ covers the whole cell; every macro grid (zones of policy ``macro`` or ``auto``) 
 cell mask (all cells for ``macro``; the cells of macro tiles for ``auto``). Each step:
 
 1. micro -> macro: micro parts whose centre lies in an active cell are removed and deposited as
-   exactly one part's worth of mass over their footprint disc (active fluid cells only);
+   exactly one part's worth of mass over their footprint disc (active fluid cells only); their
+   types go to the zone's type FIFO (below);
 2. sinks: macro mass in cells whose centre lies in a sink, and boundary outflow through faces
    leading into a sink, leave the cell;
-3. macro -> micro: boundary outflow accumulates per boundary face, mass that flowed into
-   inactive cells per cell; wherever a window of ``2 w + 1`` neighbouring accumulators (``w``
-   cells cover a part's radius) holds a whole part, one part of the macro part type is placed
-   at the window's mass centre (outside the grid for faces), with the local belt velocity,
-   without overlap (a few deterministic offsets are tried; if all overlap, it waits); one part
-   is taken from the window, the fractional remainder stays;
+3. macro -> micro: boundary outflow accumulates per boundary face; mass that flowed into the
+   inactive cells (micro tiles) of an ``auto`` zone stays in the density there and keeps
+   flowing with the belt field, except that it is held back upstream where the micro parts of
+   a cell leave no room (``rho_max h^2`` minus the part centres in it: the macro solver does
+   not see micro parts, so without this it would pile onto a micro jam). Wherever a window of
+   ``2 w + 1`` neighbouring cells / faces (``w`` cells cover a part's radius) holds a whole
+   part, one part is placed at the window's mass centre (outside the grid for faces) with the
+   local belt velocity, without overlap: a lattice of part-diameter offsets over the whole
+   window is tried, downstream along the local flow first, never onto an active cell (so it
+   is not captured again); if all overlap, it waits. One part is taken from the window, the
+   fractional remainder stays (in micro tiles it flows on, so remainders are not stranded);
 4. ``auto`` zones re-evaluate their tiles (:mod:`conveyor_twin.coord.tiles`); a tile that turns
-   macro captures its parts in step 1 of the next step, one that turns micro gives its mass to
-   the accumulators (count-exact release as whole parts, remainders carried);
+   macro captures its parts in step 1 of the next step, one that turns micro releases its
+   density as whole parts (count-exact, remainders carried);
 5. light barriers in ``macro`` zones follow :mod:`conveyor_twin.coord.macro_barriers`;
-6. the ledger: ``entered = micro parts + integral of rho + pending + left`` where ``pending``
-   is the accumulated mass not yet released; checked every step when ``check`` is on.
+6. the ledger: ``entered = micro parts + integral of rho (active cells) + pending + left``
+   where ``pending`` is the face accumulators plus the density in micro tiles not yet
+   released; checked every step when ``check`` is on.
 
-Parts released from the macro scale are new micro parts (new ids); the macro scale carries one
-part type (the cell's first), so parts of other types deposited into it come back as that type.
+Part types (count-exact per type): each macro zone keeps a FIFO of the types of the parts it
+captured, in capture order (within a step, in the micro simulator's order). Every released part
+takes the type at the head; every whole part that leaves through a sink of the zone (the sink
+outflow counted in whole parts, the fraction waits) takes the next one. So per type:
+``entered = micro parts + held in the FIFO + left`` exactly, and the FIFO length matches the
+macro mass (the ``type_residual`` of the ledger, checked with the mass ledger). Mass entering
+by a prescribed macro inflow has no type: released from an empty FIFO it becomes type 0
+(counted as ``untyped``). Parts released from the macro scale are new micro parts (new ids).
+
+Arrival spread (boundary faces of ``macro`` zones): a uniform density fed into the windows of a
+boundary face fills them all at the same pace, so they would release in lock-step rows (a beam
+just downstream then stays blocked: 74 instead of 186 edges at 150 parts/s on the default
+cell). Each face window therefore waits for ``1 + RELEASE_SPREAD u`` parts before its next
+release (``u`` uniform in [0, 1), deterministic: PCG64 for the first phases, a 48-bit LCG per
+grid after that), so the windows' phases are independent and their sum is close to the
+Poisson arrivals of the micro flow (170 vs 186 edges at 150 parts/s, 1242 vs 1434 at 50
+parts/s; more mass waits per window: up to ``1 + RELEASE_SPREAD`` parts). Windows inside
+``auto`` zones release at one part (no spread).
 """
 
 import math
@@ -53,7 +76,7 @@ _CLEARANCE = 1e-4
 # Arrival spread of released parts [parts]: after each release a window must hold
 # ``1 + RELEASE_SPREAD * u`` before the next part leaves, ``u`` uniform in [0, 1) from a
 # deterministic generator (see the module docstring).
-RELEASE_SPREAD = 0.0
+RELEASE_SPREAD = 3.0
 # Generator state of the first grid's arrival spread (each further grid adds 7919).
 JITTER_SEED = 0x5DEECE66D
 
@@ -95,7 +118,8 @@ class _Region:
         # arrival phases of the release windows (see handover.release_windows)
         self.rng = np.zeros(2)
         self.face_thr = [np.zeros(a.shape) for a in self.face_acc]
-        self.thr = np.zeros((g.ny, g.nx))
+        self.thr = np.zeros((g.ny, g.nx))  # inside auto zones: no spread (see scale docs)
+        self.rng_inner = np.zeros(2)
 
         centres, normals = g.boundary_faces()
         self.face_centres, self.face_normals = centres, normals
@@ -118,7 +142,7 @@ class _Region:
         self.rng[0] = spread
         self.rng[1] = float(state % (1 << 48))
         gen = np.random.default_rng(state)
-        for arr in self.face_thr + [self.thr]:
+        for arr in self.face_thr:
             arr[...] = spread * gen.random(arr.shape) if spread > 0.0 else 0.0
 
     def update_ranges(self) -> None:
@@ -339,16 +363,17 @@ class ScaleCoupling:
                 region.face_acc, region.face_skip, region.face_thr, region.face_ranges, sides):
             if self._tries > 0 and acc.max() >= 1.0 / (2 * region.w + 1):
                 self._release_from(region, acc, skip, thr, 1.0, rng, ox, oy, vel, nx_, ny_,
-                                   False)
+                                   False, region.rng)
         if region.tiles is not None and self._tries > 0 and region.ranges.shape[0]:
             # the density in micro tiles flows on until a window holds a whole part
             self._release_from(region, region.sim.density, region.active, region.thr, g.h * g.h,
-                               region.ranges, g.origin_x, g.origin_y, vc, 1.0, 0.0, True)
+                               region.ranges, g.origin_x, g.origin_y, vc, 1.0, 0.0, True,
+                               region.rng_inner)
 
     def _release_from(self, region: _Region, acc: np.ndarray, skip: np.ndarray,
-                      thr: np.ndarray, unit: float,
-                      ranges: np.ndarray, ox: float, oy: float, vel: np.ndarray, nx_: float,
-                      ny_: float, along_flow: bool) -> None:
+                      thr: np.ndarray, unit: float, ranges: np.ndarray, ox: float, oy: float,
+                      vel: np.ndarray, nx_: float, ny_: float, along_flow: bool,
+                      rng: np.ndarray) -> None:
         m = self.micro
         s = m.state
         w, h = region.w, region.sim.grid.h
@@ -356,7 +381,7 @@ class ScaleCoupling:
                                   2.0 * self.radius + _CLEARANCE, nx_, ny_, along_flow,
                                   region.grid_box, region.active, self._tries, self._cand,
                                   region.rot, self._near, region.fifo, region.fstate,
-                                  self.released_by_type, thr, region.rng, s.counters, s.ids,
+                                  self.released_by_type, thr, rng, s.counters, s.ids,
                                   s.part_type, s.P, m.pt, m.shapes, m.shape_verts, m.act_state,
                                   m.act_verts, m._va, m._vb, m._out)
         if int(res[0]) and acc is region.sim.density:

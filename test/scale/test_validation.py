@@ -1,0 +1,168 @@
+"""Scale coordination validated against pure micro on the default cell (issue 6).
+
+Queue length, measured the same way at both scales: the parts whose centre lies in a box, i.e.
+the micro part centres in the box plus the integral of the macro density over the grid cells
+whose centres lie in it (:meth:`MacroSim.region_parts`; this includes the density flowing in
+micro tiles before it is released) plus the boundary accumulators in it (none here: the zone
+covers the whole belt).
+"""
+
+import math
+from typing import Dict, List
+
+import numpy as np
+import pytest
+import yaml
+
+from conveyor_twin.cell.loader import cell_from_mapping, default_cell_text
+from conveyor_twin.coord.stages import MacroStage, MicroStage
+from conveyor_twin.coord.twin import Twin
+
+# The jam in front of the deflector: 2400 parts at 500 parts/s (seed 1).
+DEFLECTOR_BOX = (2.2, -0.25, 3.1, 0.25)  # upstream of the deflector's gap end (x = 3.1)
+SAMPLE_STEPS = 500
+DEFLECTOR_STEPS = 20000
+# Collision-operator speed of the multi-scale run [m/s]: the Goettlich model's one free
+# parameter, chosen so the macro jam passes the deflector gap at the micro jam's mean rate
+# (see docs/cell_format.md, zones).
+DEFLECTOR_EPSILON = 0.8
+
+
+def _deflector_cell(policy: str):
+    d = yaml.safe_load(default_cell_text())
+    d['sources'][0]['rate'] = 500.0
+    d['sources'][0]['max_parts'] = 2400
+    d['macro']['epsilon'] = DEFLECTOR_EPSILON
+    d['zones'] = [{'name': 'belt', 'policy': policy, 'region': [0.0, -0.25, 6.0, 0.25],
+                   'resolution': 0.02,
+                   'auto': {'tile': 0.2, 'to_macro_density': 3000.0,
+                            'to_micro_density': 1000.0, 'min_dwell': 0.2,
+                            'sensor_margin': 0.05}}]
+    return cell_from_mapping(d)
+
+
+def _run_deflector(policy: str) -> Dict[str, np.ndarray]:
+    cell = _deflector_cell(policy)
+    micro, macro = MicroStage(cell, 1), MacroStage(cell)
+    twin = Twin(cell, seed=1, stages=[micro, macro])
+    coupling = twin.stages[-1]
+    coupling.check = True  # the ledger is checked every step (BalanceError otherwise)
+    queue: List[float] = []
+    left: List[float] = []
+    for _ in range(DEFLECTOR_STEPS // SAMPLE_STEPS):
+        twin.step(SAMPLE_STEPS)
+        v = micro.sim.parts_view()
+        x0, y0, x1, y1 = DEFLECTOR_BOX
+        q = float(((v.x >= x0) & (v.x < x1) & (v.y >= y0) & (v.y < y1)).sum())
+        out = float(micro.sim.left[0])
+        if coupling.enabled:
+            q += macro.grids[0].region_parts(DEFLECTOR_BOX)
+            out += coupling.left_macro
+        queue.append(q)
+        left.append(out)
+    return {'queue': np.array(queue), 'left': np.array(left),
+            'edges': micro.barrier_edge_count().copy(),
+            'switches': coupling.regions[0].tiles.switches if coupling.enabled else 0,
+            'residual': coupling.max_residual if coupling.enabled else 0.0}
+
+
+@pytest.fixture(scope='module')
+def deflector_runs() -> Dict[str, Dict[str, np.ndarray]]:
+    return {'micro': _run_deflector('micro'), 'multi': _run_deflector('auto')}
+
+
+def test_deflector_queue_agrees_between_pure_micro_and_multi_scale(deflector_runs) -> None:
+    micro, multi = deflector_runs['micro'], deflector_runs['multi']
+    assert multi['switches'] > 0 and multi['residual'] <= 1e-9
+    assert micro['queue'].max() > 1000  # a real jam: over 1000 of the 2400 parts queue
+    # peak queue and time-mean queue (the mean waiting, Little's law) within 5 %
+    assert multi['queue'].max() == pytest.approx(micro['queue'].max(), rel=0.05)
+    assert multi['queue'].mean() == pytest.approx(micro['queue'].mean(), rel=0.05)
+
+
+def test_exit_throughput_agrees_between_pure_micro_and_multi_scale(deflector_runs) -> None:
+    micro, multi = deflector_runs['micro'], deflector_runs['multi']
+    # every part leaves through the exit at both scales (multi-scale: but a few thousandths
+    # of a part of density still spread on the belt, on its way to the exit sink)
+    assert micro['left'][-1] == 2400
+    assert multi['left'][-1] == pytest.approx(2400, abs=0.01)
+
+    def exit_time(left: np.ndarray, fraction: float) -> float:
+        k = int(np.argmax(left >= fraction * 2400))
+        return (k + 1) * SAMPLE_STEPS * 1e-3
+
+    # the mean exit time (integral of the parts not yet out) and the median within 5 %
+    mean_exit = [float((2400 - r['left']).sum()) * SAMPLE_STEPS * 1e-3 / 2400
+                 for r in (micro, multi)]
+    assert mean_exit[1] == pytest.approx(mean_exit[0], rel=0.05)
+    assert exit_time(multi['left'], 0.5) == pytest.approx(exit_time(micro['left'], 0.5),
+                                                          rel=0.05)
+
+
+def test_barrier_upstream_of_the_jam_counts_identical_edges(deflector_runs) -> None:
+    # lb_infeed (x = 2.0) sits in a sensor window upstream of every macro tile: the parts it
+    # sees never went through the macro scale, so its edges are the pure micro ones.
+    assert deflector_runs['multi']['edges'][0] == deflector_runs['micro']['edges'][0]
+    assert deflector_runs['micro']['edges'][0] > 0
+
+
+def _stopper_run(policy: str) -> List[float]:
+    """Feed 2000 parts at 600/s against the closed stopper (x = 1.2), open it at 4 s; return
+    the parts in [0.3, 1.2] and in the 0.1 m box in front of the stopper every 0.1 s."""
+    d = yaml.safe_load(default_cell_text())
+    d['sources'][0]['rate'] = 600.0
+    d['sources'][0]['max_parts'] = 2000
+    d['zones'] = [{'name': 'in', 'policy': policy, 'region': [0.0, -0.25, 2.6, 0.25],
+                   'resolution': 0.02,
+                   'auto': {'tile': 0.1, 'to_macro_density': 4000.0, 'to_micro_density': 1500.0,
+                            'min_dwell': 0.2, 'sensor_margin': 0.05}},
+                  {'name': 'out', 'policy': 'micro', 'region': [2.6, -0.25, 6.0, 0.25]}]
+    cell = cell_from_mapping(d)
+    micro, macro = MicroStage(cell, 1), MacroStage(cell)
+    twin = Twin(cell, seed=1, stages=[micro, macro])
+    coupling = twin.stages[-1]
+    coupling.check = True
+    twin.commands.submit_actuator('stopper', 0.008)
+
+    def parts(x0: float, x1: float) -> float:
+        v = micro.sim.parts_view()
+        q = float(((v.x >= x0) & (v.x < x1)).sum())
+        if coupling.enabled:
+            q += macro.grids[0].region_parts((x0, -0.25, x1, 0.25))
+        return q
+
+    up, front = [], []
+    for k in range(60):
+        if k == 40:
+            twin.commands.submit_actuator('stopper', 0.0)
+        twin.step(100)
+        up.append(parts(0.3, 1.2))
+        front.append(parts(1.1, 1.2))
+    if policy == 'auto':
+        assert coupling.regions[0].tiles.switches > 0
+    return [np.array(up), np.array(front), micro.sim.entered]
+
+
+def test_stopper_queue_grows_and_dissolves_as_predicted_at_both_scales() -> None:
+    # Prediction: while the stopper is closed every fed part stays upstream (the queue grows
+    # at the feed rate until the source stops at 2000 parts); once it opens the jam leaves at
+    # the flux of a packed queue moving at the belt speed, rho_jam v W (v = 0.5 m/s, W = 0.5
+    # m), with rho_jam the micro jam's packing in front of the stopper; it is gone after its
+    # length L = N / (rho_jam W) has passed at v (plus the parts still arriving).
+    micro_up, micro_front, entered = _stopper_run('micro')
+    multi_up, multi_front, _ = _stopper_run('auto')
+    # growth: the parts fed (the source's count) are upstream, at both scales
+    assert micro_up[39] == 2000 and entered == 2000
+    for a, b in zip(micro_up[:40], multi_up[:40]):
+        assert b == pytest.approx(a, abs=1e-6)
+    rho_jam = micro_front[39] / (0.1 * 0.5)
+    assert 0.8 * 11547 < rho_jam <= 11547  # random close packing of the 10 mm discs
+    rate = rho_jam * 0.5 * 0.5
+    # dissolution: 0.2 s after opening (the stopper has dropped), over 0.4 s
+    for up in (micro_up, multi_up):
+        measured = (up[41] - up[45]) / 0.4
+        assert measured == pytest.approx(rate, rel=0.1)
+    # gone once the queue has passed at the belt speed (2000 parts: L ~ 0.4 m, 0.8 s) plus
+    # the tail of the feed that was still spread upstream: within 2 s at both scales
+    assert micro_up[59] == 0 and multi_up[59] == pytest.approx(0.0, abs=0.5)
+    assert math.isclose(micro_up[59], multi_up[59], abs_tol=0.5)
