@@ -598,6 +598,10 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp):
     """
     frac = mp[MP_CORRECTION]
     shocking = passes >= 2
+    last_vt = last_mu_k = last_mu_s = math.nan     # NaN: differs from everything
+    last_ima = last_imb = math.nan
+    slope = 0.0
+    w = 0.0
     for c in range(nc):
         a = cidx[c, 0]
         b = cidx[c, 1]
@@ -631,10 +635,22 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp):
             ct[c, CT_IKN_S] = ct[c, CT_IKN]
             ct[c, CT_IKT_S] = ct[c, CT_IKT]
             ct[c, CT_CNT_S] = ct[c, CT_CNT]
+        # the same materials and masses as the contact before (the common case): the same
+        # quotients, without dividing again
         v_t = ct[c, CT_V_T]
-        ct[c, CT_SLOPE] = (ct[c, CT_MU_K] - ct[c, CT_MU_S]) / v_t if v_t > 0.0 else 0.0
+        mu_k = ct[c, CT_MU_K]
+        mu_s = ct[c, CT_MU_S]
+        if v_t != last_vt or mu_k != last_mu_k or mu_s != last_mu_s:
+            last_vt = v_t
+            last_mu_k = mu_k
+            last_mu_s = mu_s
+            slope = (mu_k - mu_s) / v_t if v_t > 0.0 else 0.0
+        ct[c, CT_SLOPE] = slope
         ct[c, CT_NEG_1PE] = -(1.0 + ct[c, CT_E])
-        w = frac / (ima + imb)
+        if ima != last_ima or imb != last_imb:
+            last_ima = ima
+            last_imb = imb
+            w = frac / (ima + imb)
         ct[c, CT_WA] = w * ima
         ct[c, CT_WB] = w * imb
 

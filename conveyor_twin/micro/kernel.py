@@ -96,6 +96,7 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
     """Advance ``nsteps`` steps in place (see the module docstring for the arrays' meaning)."""
     dt = cfg[CF_DT]
     mode = int(cfg[CF_MODE])
+    impulse = mode != MODE_PENALTY
     track = mp[MP_TRACK] != 0.0
     x = P[P_X]
     y = P[P_Y]
@@ -173,10 +174,10 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
                 belt_key(n, x, y, belts, key)
                 prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp)
                 solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc)
-                for i in range(n):
-                    fx[i] = x[i]
-                    fy[i] = y[i]
             for i in range(n):
+                if impulse:
+                    fx[i] = x[i]      # positions at detection, for correct_positions
+                    fy[i] = y[i]
                 x[i] += h * vx[i]
                 y[i] += h * vy[i]
                 a = yaw[i] + h * wz[i]
@@ -185,7 +186,7 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
                 elif a <= -math.pi:
                     a += 2.0 * math.pi
                 yaw[i] = a
-            if mode != MODE_PENALTY:
+            if impulse:
                 # fx, fy hold the positions at detection
                 correct_positions(nc, ct, cidx, ptype, x, y, fx, fy, pt, passes, key, mp)
             if track:
