@@ -41,3 +41,20 @@ def test_stiffer_springs_are_less_active_in_a_resting_jam():
     if len(ratios) > 1:
         assert ratios[-1] < ratios[0]
     assert spring_ratio(picks.activity) == picks.ratio
+
+
+def test_impact_restitution_exact_for_impulses_step_dependent_for_springs():
+    from conveyor_twin.bench import micro as bench
+    # the impulse model's restitution is the part's, at any step
+    assert bench.impact_restitution('impulse', 1e-3) == pytest.approx(0.4, abs=1e-12)
+    # stainless steel line contact of the 10 mm high discs, k = (pi / 4) E* L
+    k = bench.seed_stiffness(bench.scene(2))
+    assert k == pytest.approx(8.28e8, rel=1e-2)
+    # penalty springs: the error grows with omega dt; 12 steps per period keep it near 5 %
+    res = bench.largest_accurate_step(1e5, 5.0)
+    errors = list(res['errors'].values())
+    assert errors == sorted(errors, reverse=True) and errors[-1] <= bench.IMPACT_TOLERANCE
+    f = bench.contact_frequency(bench.scene(2), 1e5)
+    rule = 1.0 / (bench.STEPS_PER_PERIOD * f)
+    e = bench.impact_restitution('penalty', rule, penalty_stiffness=1e5, penalty_damping=5.0)
+    assert abs(e - res['converged_restitution']) < 0.1 * res['converged_restitution']
