@@ -50,7 +50,8 @@ EVENT_CAPACITY = 4096
 PENALTY_OMEGA_DT = 0.5
 # Impulse model: sweeps over the contacts per substep (the first with restitution; the others
 # plastic, touching only contacts still closing: they matter only where contacts share bodies,
-# as in a jam). 1 is the seed's single pass.
+# as in a jam). 1 is the seed's single pass; it does not hold a jam (discs overlap by up to a
+# diameter, see the contacts module's docstring), so 2.
 CONTACT_PASSES = 2
 # Neighbour list skin as a fraction of the smallest part radius: a part may move 0.49 of it
 # before the list is rebuilt (in a jam it lives for many steps; in free flow at 0.5 m/s with
