@@ -88,6 +88,25 @@ def restore_rows(wx: np.ndarray, wy: np.ndarray, ux: np.ndarray, uy: np.ndarray,
 
 
 @njit(cache=True)
+def restore_faces(wx: np.ndarray, wy: np.ndarray, ux: np.ndarray, uy: np.ndarray,
+                  lohi: np.ndarray) -> None:
+    """Reset to the belt field the faces :func:`collision_operator` sets for ``lohi``."""
+    ny = ux.shape[0]
+    nx = ux.shape[1] - 1
+    for j in range(ny):
+        lo = lohi[j, 0]
+        hi = lohi[j, 1]
+        if hi <= lo:
+            continue
+        for f in range(max(lo, 1), min(hi, nx - 1) + 1):
+            wx[j, f] = ux[j, f]
+    for f in range(1, ny):
+        a, b = _face_row_range(lohi, f, ny)
+        for i in range(a, b):
+            wy[f, i] = uy[f, i]
+
+
+@njit(cache=True)
 def full_rows(rho: np.ndarray, full: float, lohi: np.ndarray) -> bool:
     """Store per row the column range ``[lo, hi)`` of cells with ``rho >= full``.
 
@@ -116,7 +135,7 @@ def full_rows(rho: np.ndarray, full: float, lohi: np.ndarray) -> bool:
     return found
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: float,
                        h: float, w: np.ndarray, dx: np.ndarray, dy: np.ndarray,
                        gx: np.ndarray, gy: np.ndarray, ux: np.ndarray, uy: np.ndarray,
@@ -128,18 +147,20 @@ def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: 
     (zero across faces touching a solid cell: no gradient through a wall) mollified with the
     separable taps ``w`` along both axes. Work is confined, row by row, to the full cells grown
     by ``K = 2 r + 3`` cells (Chebyshev), enough for every value the operator faces use to be
-    computed from fresh inputs; the region written by the previous call (``rng``) is first
-    reset to the belt field ``ux``, ``uy``.
+    computed from fresh inputs; the faces set by the previous call (those of ``lohi``) are
+    first reset to the belt field ``ux``, ``uy``.
 
     :param w: 1D mollifier taps. :param dx: work ``(ny, nx + 1)``, :param dy: work
         ``(ny + 1, nx)``: face differences [parts/m^3]; :param gx: work ``(ny, nx + 1)``,
         :param gy: work ``(ny + 1, nx)``: mollified gradients (x pass, then both).
-    :param lohi: work int64 ``(ny, 2)``: per-row range of full cells.
-    :param rng: int64 ``(ny, 2)``: per-row work range, kept between calls (see above).
+    :param lohi: int64 ``(ny, 2)``: per-row range of full cells, kept between calls (see
+        above; all ``(0, 0)`` or stale ranges where ``wx``, ``wy`` equal ``ux``, ``uy`` when
+        the field is rebuilt).
+    :param rng: work int64 ``(ny, 2)``: per-row work range.
     :return: True if the operator is active anywhere.
     """
     ny, nx = rho.shape
-    restore_rows(wx, wy, ux, uy, rng)
+    restore_faces(wx, wy, ux, uy, lohi)
     full = rho_max * (1.0 - H_TOLERANCE)
     if not full_rows(rho, full, lohi):
         for j in range(ny):
@@ -180,75 +201,80 @@ def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: 
             if 0 < f < ny and solid[f - 1, i] == 0 and solid[f, i] == 0:
                 d = (rho[f, i] - rho[f - 1, i]) * inv_h
             dy[f, i] = d
-    # Separable mollification: along x into gx / gy, then along y back into dx / dy.
+    # Separable mollification: along x into gx / gy, then along y back into dx / dy. Each
+    # output is the sum over the taps in tap order, skipping taps outside the region (the
+    # grid); the loops run tap by tap over contiguous memory, which gives the same sums.
     for j in range(ny):
         a = rng[j, 0]
         b = rng[j, 1]
         if b <= a:
             continue
         for f in range(a, b + 1):
-            s = 0.0
-            for k in range(-r, r + 1):
-                ff = f + k
-                if a <= ff <= b:
-                    s += w[k + r] * dx[j, ff]
-            gx[j, f] = s
+            gx[j, f] = 0.0
+        for k in range(-r, r + 1):
+            wk = w[k + r]
+            for f in range(max(a, a - k), min(b, b - k) + 1):
+                gx[j, f] += wk * dx[j, f + k]
     for f in range(ny + 1):
         a, b = _face_row_range(rng, f, ny)
         for i in range(a, b):
-            s = 0.0
-            for k in range(-r, r + 1):
-                ii = i + k
-                if a <= ii < b:
-                    s += w[k + r] * dy[f, ii]
-            gy[f, i] = s
+            gy[f, i] = 0.0
+        for k in range(-r, r + 1):
+            wk = w[k + r]
+            for i in range(max(a, a - k), min(b, b - k)):
+                gy[f, i] += wk * dy[f, i + k]
     for j in range(ny):
         a = rng[j, 0]
         b = rng[j, 1]
         if b <= a:
             continue
         for f in range(a, b + 1):
-            s = 0.0
-            for k in range(-r, r + 1):
-                jj = j + k
-                if 0 <= jj < ny:
-                    s += w[k + r] * gx[jj, f]
-            dx[j, f] = s
+            dx[j, f] = 0.0
+        for k in range(-r, r + 1):
+            jj = j + k
+            if 0 <= jj < ny:
+                wk = w[k + r]
+                for f in range(a, b + 1):
+                    dx[j, f] += wk * gx[jj, f]
     for f in range(ny + 1):
         a, b = _face_row_range(rng, f, ny)
         for i in range(a, b):
-            s = 0.0
-            for k in range(-r, r + 1):
-                ff = f + k
-                if 0 <= ff <= ny:
-                    s += w[k + r] * gy[ff, i]
-            dy[f, i] = s
+            dy[f, i] = 0.0
+        for k in range(-r, r + 1):
+            ff = f + k
+            if 0 <= ff <= ny:
+                wk = w[k + r]
+                for i in range(a, b):
+                    dy[f, i] += wk * gy[ff, i]
     # Operator on the faces next to full cells: dx, dy now hold the mollified gradients.
+    # Branch-free (every face of the range is computed, inactive ones get the belt velocity,
+    # which they hold already), so the loops vectorise.
     for j in range(ny):
         lo = lohi[j, 0]
         hi = lohi[j, 1]
         if hi <= lo:
             continue
         for f in range(max(lo, 1), min(hi, nx - 1) + 1):
-            if solid[j, f - 1] != 0 or solid[j, f] != 0:
-                continue
-            if rho[j, f - 1] < full and rho[j, f] < full:
-                continue
+            rl = rho[j, f - 1]
+            rr = rho[j, f]
             tx = dx[j, f]
-            if tx * (rho[j, f] - rho[j, f - 1]) <= 0.0:
-                continue  # push only down the local density difference (monotone)
             ty = 0.25 * (dy[j, f - 1] + dy[j, f] + dy[j + 1, f - 1] + dy[j + 1, f])
-            wx[j, f] = ux[j, f] - eps * tx / math.sqrt(1.0 + tx * tx + ty * ty)
+            # push only down the local density difference (monotone)
+            act = ((solid[j, f - 1] == 0) & (solid[j, f] == 0) & ((rl >= full) | (rr >= full))
+                   & (tx * (rr - rl) > 0.0))
+            u = ux[j, f]
+            v = u - eps * tx / math.sqrt(1.0 + tx * tx + ty * ty)
+            wx[j, f] = v if act else u
     for f in range(1, ny):
         a, b = _face_row_range(lohi, f, ny)
         for i in range(a, b):
-            if solid[f - 1, i] != 0 or solid[f, i] != 0:
-                continue
-            if rho[f - 1, i] < full and rho[f, i] < full:
-                continue
+            rl = rho[f - 1, i]
+            rr = rho[f, i]
             ty = dy[f, i]
-            if ty * (rho[f, i] - rho[f - 1, i]) <= 0.0:
-                continue
             tx = 0.25 * (dx[f - 1, i] + dx[f - 1, i + 1] + dx[f, i] + dx[f, i + 1])
-            wy[f, i] = uy[f, i] - eps * ty / math.sqrt(1.0 + tx * tx + ty * ty)
+            act = ((solid[f - 1, i] == 0) & (solid[f, i] == 0) & ((rl >= full) | (rr >= full))
+                   & (ty * (rr - rl) > 0.0))
+            u = uy[f, i]
+            v = u - eps * ty / math.sqrt(1.0 + tx * tx + ty * ty)
+            wy[f, i] = v if act else u
     return True

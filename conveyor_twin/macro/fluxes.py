@@ -55,34 +55,62 @@ def limited_slope(dl: float, dr: float, limiter: int) -> float:
 
 @njit(cache=True)
 def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float,
-                  has_negative: bool, hi: int) -> None:
+                  has_negative: bool, hi: int, seed: np.ndarray) -> None:
     """Receiver cut of one line (faces ``0..n``, cells ``0..n-1``).
 
     :param has_negative: False if no face amount is negative (the second pass is skipped).
     :param hi: one past the last cell that could overflow (:func:`_line_excess`): the
         downstream-first pass starts there, as every face downstream of it is left unchanged
         (a cell that cannot overflow, with its downstream face unchanged, keeps its inflow).
+    :param seed: uint8 work ``(>= n + 1,)``.
+
+    A face is cut only if its receiver overflows, with the receiver's downstream face as it is
+    when the face is visited; that face differs from its demand only if it was cut itself. So
+    a branch-free pass first marks the faces whose cut condition holds on the demands
+    (``seed``), and the sequential downstream-first pass visits only those and the chains of
+    faces upstream of a cut face; the others would be visited without effect. The same
+    arithmetic as a visit of every face, so the same results bit for bit.
     """
-    for f in range(hi - 1, -1, -1):
+    for f in range(hi):
         af = a[f]
-        if af <= 0.0:
-            continue
         ar = a[f + 1]
-        if ar < 0.0:
-            cap = rho_max - rho[f]
-            total = af - ar
-            if cap < 0.0:
-                cap = 0.0
-            if total > cap:
-                s = cap / total
-                a[f] = af * s
-                a[f + 1] = ar * s
-        else:
-            cap = rho_max - rho[f] + ar
-            if cap < 0.0:
-                cap = 0.0
-            if af > cap:
-                a[f] = cap
+        base = rho_max - rho[f]
+        cap_c = max(base, 0.0)
+        cap_o = max(base + ar, 0.0)
+        conv = ar < 0.0
+        t = af - ar if conv else af
+        c = cap_c if conv else cap_o
+        seed[f] = (af > 0.0) & (t > c)
+    f = hi - 1
+    dirty = False
+    while f >= 0:
+        if not dirty:
+            while f >= 0 and seed[f] == 0:
+                f -= 1
+            if f < 0:
+                break
+        af = a[f]
+        dirty = False
+        if af > 0.0:
+            ar = a[f + 1]
+            if ar < 0.0:
+                cap = rho_max - rho[f]
+                total = af - ar
+                if cap < 0.0:
+                    cap = 0.0
+                if total > cap:
+                    s = cap / total
+                    a[f] = af * s
+                    a[f + 1] = ar * s
+                    dirty = True
+            else:
+                cap = rho_max - rho[f] + ar
+                if cap < 0.0:
+                    cap = 0.0
+                if af > cap:
+                    a[f] = cap
+                    dirty = True
+        f -= 1
     if not has_negative:
         return
     for f in range(1, n + 1):
@@ -164,7 +192,8 @@ def _donor_line(a: np.ndarray, rho: np.ndarray, n: int) -> None:
 @njit(cache=True)
 def sweep_x(rho: np.ndarray, wx: np.ndarray, solid: np.ndarray, dts: float, h: float,
             rho_max: float, capped: bool, limited: bool, limiter: int, in_rate: np.ndarray,
-            in_acc: np.ndarray, out_acc: np.ndarray, a: np.ndarray, slope: np.ndarray) -> None:
+            in_acc: np.ndarray, out_acc: np.ndarray, a: np.ndarray, slope: np.ndarray,
+            seed: np.ndarray) -> None:
     """Advance ``rho`` by one x sweep of length ``dts`` [s] in place.
 
     :param rho: ``(ny, nx)`` density [parts/m^2].
@@ -175,7 +204,8 @@ def sweep_x(rho: np.ndarray, wx: np.ndarray, solid: np.ndarray, dts: float, h: f
     :param in_rate: ``(2 (nx + ny),)`` prescribed inflow per boundary face [parts/s].
     :param in_acc: accepted inflow per boundary face [parts], accumulated.
     :param out_acc: outflow per boundary face [parts], accumulated.
-    :param a: work ``(ny, nx + 1)``; :param slope: work ``(ny, nx)``.
+    :param a: work ``(ny, nx + 1)``; :param slope: work ``(ny, nx)``; :param seed: uint8
+        work ``(>= nx + 1,)``.
 
     The donor and receiver passes run only on rows where some cell could be overdrawn or
     overflow, which a cheap check after the demand pass detects.
@@ -231,7 +261,7 @@ def sweep_x(rho: np.ndarray, wx: np.ndarray, solid: np.ndarray, dts: float, h: f
             hi = _line_excess(aj, r, nx, rho_max)
             if hi > 0:
                 negative += (aj[0] < 0.0) + (aj[nx] < 0.0)
-                _cap_line_pos(aj, r, nx, rho_max, negative > 0, hi)
+                _cap_line_pos(aj, r, nx, rho_max, negative > 0, hi, seed)
         for i in range(nx):
             r[i] += aj[i] - aj[i + 1]
         a0 = aj[0]
@@ -246,14 +276,75 @@ def sweep_x(rho: np.ndarray, wx: np.ndarray, solid: np.ndarray, dts: float, h: f
             in_acc[ny + j] -= an * area
 
 
+@njit(cache=True, inline='always')
+def _cell_row_range(yr: np.ndarray, j: int, ny: int, nx: int):
+    """Return the columns ``[lo, hi)`` of cell row ``j`` that a y face can change.
+
+    Hull of the ranges of its two face rows; the grid's edge face rows count as full.
+    """
+    if j == 0 or j == ny - 1:
+        return 0, nx
+    lo = yr[j, 0]
+    hi = yr[j, 1]
+    lo2 = yr[j + 1, 0]
+    hi2 = yr[j + 1, 1]
+    if hi2 > lo2:
+        if hi > lo:
+            lo = min(lo, lo2)
+            hi = max(hi, hi2)
+        else:
+            lo = lo2
+            hi = hi2
+    return lo, hi
+
+
+@njit(cache=True, inline='always')
+def _face_cols(yr: np.ndarray, f: int, ny: int, nx: int):
+    """Return the columns ``[lo, hi)`` of y-face row ``f`` that may carry a non-zero amount."""
+    if f == 0 or f == ny:
+        return 0, nx
+    return yr[f, 0], yr[f, 1]
+
+
+@njit(cache=True)
+def y_ranges(uy: np.ndarray, yr: np.ndarray) -> None:
+    """Store per y-face row ``f`` the columns ``[lo, hi)`` outside which ``uy[f]`` is zero.
+
+    :param uy: ``(ny + 1, nx)`` face velocities [m/s]; :param yr: int64 ``(ny + 1, 2)``,
+        ``(0, 0)`` for a row without velocity.
+    """
+    nf, nx = uy.shape
+    for f in range(nf):
+        lo = nx
+        hi = 0
+        for i in range(nx):
+            if uy[f, i] != 0.0:
+                lo = min(lo, i)
+                hi = i + 1
+        if hi <= lo:
+            lo = 0
+            hi = 0
+        yr[f, 0] = lo
+        yr[f, 1] = hi
+
+
 @njit(cache=True)
 def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: float,
             rho_max: float, capped: bool, limited: bool, limiter: int, in_rate: np.ndarray,
-            in_acc: np.ndarray, out_acc: np.ndarray, a: np.ndarray, slope: np.ndarray) -> None:
+            in_acc: np.ndarray, out_acc: np.ndarray, a: np.ndarray, yr: np.ndarray) -> None:
     """Advance ``rho`` by one y sweep; arguments as :func:`sweep_x` with ``(ny + 1, nx)`` faces.
 
-    Rows are visited in the outer loop so every inner loop runs over contiguous memory; the
-    cut passes run over the whole grid if any cell could overflow or be overdrawn.
+    :param yr: int64 ``(ny + 1, 2)``: per interior face row ``f`` the columns ``[lo, hi)``
+        outside which ``wy[f]`` is zero (:func:`y_ranges`, merged with the operator's faces).
+    :param a: work ``(ny + 1, nx)``; its interior face rows must be zero on entry, and are
+        left zero (only the ranges ``yr`` are written, and cleared at the end).
+
+    A face of zero velocity has a zero amount and changes nothing (the donor and receiver
+    cuts leave zero amounts alone), so demands, slopes, cuts and the update run only on the
+    face ranges ``yr`` and the cells next to them: on a belt running along x, only the
+    sliding layers in front of obstacles and the operator's faces. The edge face rows are
+    computed in full. Rows are visited in the outer loop so every inner loop runs over
+    contiguous memory.
     """
     ny, nx = rho.shape
     k = dts / h
@@ -274,33 +365,32 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
         else:
             a[ny, i] = -in_rate[b1 + i] * in_scale if solid[ny - 1, i] == 0 else 0.0
     if limited:
-        for i in range(nx):
-            slope[0, i] = 0.0
-            slope[ny - 1, i] = 0.0
-        for j in range(1, ny - 1):
-            for i in range(nx):
-                s = 0.0
-                if solid[j - 1, i] == 0 and solid[j + 1, i] == 0:
-                    s = limited_slope(rho[j, i] - rho[j - 1, i], rho[j + 1, i] - rho[j, i],
-                                      limiter)
-                slope[j, i] = s
         for f in range(1, ny):
-            for i in range(nx):
+            for i in range(yr[f, 0], yr[f, 1]):
                 w = wy[f, i]
                 c = w * k
                 negative += w < 0.0
-                if w > 0.0:
-                    a[f, i] = c * (rho[f - 1, i] + 0.5 * (1.0 - c) * slope[f - 1, i])
-                elif w < 0.0:
-                    a[f, i] = c * (rho[f, i] - 0.5 * (1.0 + c) * slope[f, i])
+                if w != 0.0:
+                    jd = f - 1 if w > 0.0 else f      # donor row
+                    s = 0.0
+                    if (0 < jd < ny - 1 and solid[jd - 1, i] == 0
+                            and solid[jd + 1, i] == 0):
+                        s = limited_slope(rho[jd, i] - rho[jd - 1, i],
+                                          rho[jd + 1, i] - rho[jd, i], limiter)
+                    if w > 0.0:
+                        a[f, i] = c * (rho[jd, i] + 0.5 * (1.0 - c) * s)
+                    else:
+                        a[f, i] = c * (rho[jd, i] - 0.5 * (1.0 + c) * s)
                 else:
                     a[f, i] = 0.0
         count = 0
         for j in range(ny):
-            count += _pair_overdraw(a[j], a[j + 1], rho[j], nx)
+            lo, hi = _cell_row_range(yr, j, ny, nx)
+            count += _pair_overdraw(a[j, lo:hi], a[j + 1, lo:hi], rho[j, lo:hi], hi - lo)
         if count > 0:
             for j in range(ny):
-                for i in range(nx):
+                lo, hi = _cell_row_range(yr, j, ny, nx)
+                for i in range(lo, hi):
                     out = max(a[j + 1, i], 0.0) - min(a[j, i], 0.0)
                     if out > rho[j, i]:
                         s = rho[j, i] / out if out > 0.0 else 0.0
@@ -308,10 +398,9 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
                             a[j + 1, i] *= s
                         if a[j, i] < 0.0:
                             a[j, i] *= s
-    else:
-        # Upwind: the demand of face row j + 1 and the overflow check of cell row j in one
-        # pass (row j's faces are final once row j + 1's are computed), so the cut needs no
-        # further pass over the grid; same arithmetic as the separate passes.
+    if capped or not limited:
+        # The upwind demand of face row j + 1 and the overflow check of cell row j in one
+        # pass (row j's faces are final once row j + 1's are computed).
         count = 0
         i0 = nx
         i1 = 0
@@ -319,16 +408,20 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
         j1 = -1
         for j in range(ny):
             f = j + 1
-            if f < ny:
-                for i in range(nx):
+            if f < ny and not limited:
+                for i in range(yr[f, 0], yr[f, 1]):
                     w = wy[f, i]
                     negative += w < 0.0
                     a[f, i] = w * k * (rho[f - 1, i] if w > 0.0 else rho[f, i])
-            if capped and _pair_excess(a[j], a[j + 1], rho[j], nx, rho_max) > 0:
+            if not capped:
+                continue
+            lo, hi = _cell_row_range(yr, j, ny, nx)
+            if _pair_excess(a[j, lo:hi], a[j + 1, lo:hi], rho[j, lo:hi], hi - lo,
+                            rho_max) > 0:
                 count += 1
                 j0 = min(j0, j)
                 j1 = j
-                for i in range(nx):
+                for i in range(lo, hi):
                     v = rho[j, i] + max(a[j, i], 0.0) - min(a[j + 1, i], 0.0)
                     if v > rho_max:
                         i0 = min(i0, i)
@@ -336,33 +429,10 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
         if count > 0:
             for i in range(nx):
                 negative += (a[0, i] < 0.0) + (a[ny, i] < 0.0)
-            _cap_grid_y(a, rho, rho_max, i0, i1, j0, j1, negative > 0)
-    if capped and limited:
-        count = 0
-        for j in range(ny):
-            count += _pair_excess(a[j], a[j + 1], rho[j], nx, rho_max)
-        if count > 0:
-            # Columns without an overflowing cell are left unchanged by the cut: skip them.
-            # and the cut propagates only upstream of the overflowing rows.
-            i0 = nx
-            i1 = 0
-            j0 = ny
-            j1 = -1
-            for j in range(ny):
-                if _pair_excess(a[j], a[j + 1], rho[j], nx, rho_max) == 0:
-                    continue
-                j0 = min(j0, j)
-                j1 = j
-                for i in range(nx):
-                    v = rho[j, i] + max(a[j, i], 0.0) - min(a[j + 1, i], 0.0)
-                    if v > rho_max:
-                        i0 = min(i0, i)
-                        i1 = max(i1, i + 1)
-            for i in range(nx):
-                negative += (a[0, i] < 0.0) + (a[ny, i] < 0.0)
-            _cap_grid_y(a, rho, rho_max, i0, i1, j0, j1, negative > 0)
+            _cap_grid_y(a, rho, rho_max, i0, i1, j0, j1, negative > 0, yr)
     for j in range(ny):
-        for i in range(nx):
+        lo, hi = _cell_row_range(yr, j, ny, nx)
+        for i in range(lo, hi):
             rho[j, i] += a[j, i] - a[j + 1, i]
     for i in range(nx):
         a0 = a[0, i]
@@ -375,19 +445,24 @@ def sweep_y(rho: np.ndarray, wy: np.ndarray, solid: np.ndarray, dts: float, h: f
             out_acc[b1 + i] += an * area
         else:
             in_acc[b1 + i] -= an * area
+    for f in range(1, ny):
+        for i in range(yr[f, 0], yr[f, 1]):
+            a[f, i] = 0.0
 
 
 @njit(cache=True)
 def _cap_grid_y(a: np.ndarray, rho: np.ndarray, rho_max: float, i0: int, i1: int, j0: int,
-                j1: int, has_negative: bool) -> None:
+                j1: int, has_negative: bool, yr: np.ndarray) -> None:
     """Receiver cut of a y sweep (as :func:`_cap_line_pos`) on the columns ``i0..i1-1``.
 
     ``j0``, ``j1``: first and last row with an overflowing cell (the cut propagates only
-    upstream of them). ``has_negative``: False skips the negative-face pass.
+    upstream of them). ``has_negative``: False skips the negative-face pass. ``yr``: face
+    ranges of :func:`sweep_y` (amounts are zero outside them and are left alone).
     """
-    ny = rho.shape[0]
+    ny, nx = rho.shape
     for f in range(j1, -1, -1):
-        for i in range(i0, i1):
+        lo, hi = _face_cols(yr, f, ny, nx)
+        for i in range(max(i0, lo), min(i1, hi)):
             af = a[f, i]
             if af <= 0.0:
                 continue
@@ -410,7 +485,8 @@ def _cap_grid_y(a: np.ndarray, rho: np.ndarray, rho_max: float, i0: int, i1: int
     if not has_negative:
         return
     for f in range(j0 + 1, ny + 1):
-        for i in range(i0, i1):
+        lo, hi = _face_cols(yr, f, ny, nx)
+        for i in range(max(i0, lo), min(i1, hi)):
             af = a[f, i]
             if af >= 0.0:
                 continue

@@ -68,36 +68,69 @@ DEPOSIT_SAMPLES = 8
 
 
 @njit(cache=True)
+def _merge_y_ranges(yr: np.ndarray, lohi: np.ndarray, out: np.ndarray) -> None:
+    """Store in ``out`` the hull of the y-face ranges ``yr`` and the operator's y faces."""
+    nf = yr.shape[0]
+    ny = nf - 1
+    for f in range(nf):
+        lo = yr[f, 0]
+        hi = yr[f, 1]
+        if 0 < f < ny:
+            a, b = _col._face_row_range(lohi, f, ny)
+            if b > a:
+                if hi > lo:
+                    lo = min(lo, a)
+                    hi = max(hi, b)
+                else:
+                    lo = a
+                    hi = b
+        out[f, 0] = lo
+        out[f, 1] = hi
+
+
+@njit(cache=True)
 def advance(nsteps: int, nsub: int, dts: float, parity: np.ndarray, rho: np.ndarray,
             ux: np.ndarray, uy: np.ndarray, wx: np.ndarray, wy: np.ndarray, use_op: bool,
             solid: np.ndarray, h: float, rho_max: float, capped: bool, limited: bool,
             limiter: int, in_rate: np.ndarray, in_acc: np.ndarray, out_acc: np.ndarray,
-            ax: np.ndarray, ay: np.ndarray, slope: np.ndarray, eps: float, w: np.ndarray,
+            out_total: np.ndarray, ax: np.ndarray, ay: np.ndarray, slope: np.ndarray,
+            seed: np.ndarray, yr: np.ndarray, yr_op: np.ndarray, eps: float, w: np.ndarray,
             dx: np.ndarray, dy: np.ndarray, gx: np.ndarray, gy: np.ndarray, lohi: np.ndarray,
             rng: np.ndarray) -> None:
     """Advance ``nsteps`` twin steps of ``nsub`` substeps of ``dts`` [s] each, in place.
 
     ``parity[0]`` counts substeps (the sweep order alternates with it). ``wx``, ``wy`` are the
     total face velocities (equal to the belt field ``ux``, ``uy`` except where the collision
-    operator acts). Arguments as in :func:`conveyor_twin.macro.fluxes.sweep_x` and
+    operator acts). ``in_acc``, ``out_acc`` are zeroed first and hold this call's boundary
+    amounts [parts]; ``out_acc`` is then added to ``out_total``. ``yr``: y-face ranges of the
+    belt field (:func:`conveyor_twin.macro.fluxes.y_ranges`); ``yr_op``: work of the same
+    shape (merged with the operator's faces). Other arguments as in
+    :func:`conveyor_twin.macro.fluxes.sweep_x` and
     :func:`conveyor_twin.macro.collision.collision_operator`.
     """
+    in_acc[:] = 0.0
+    out_acc[:] = 0.0
     for _ in range(nsteps):
         for _q in range(nsub):
+            yrs = yr
             if use_op:
                 _col.collision_operator(rho, solid, rho_max, eps, h, w, dx, dy, gx, gy, ux, uy,
                                         wx, wy, lohi, rng)
+                _merge_y_ranges(yr, lohi, yr_op)
+                yrs = yr_op
             if parity[0] % 2 == 0:
                 _fx.sweep_x(rho, wx, solid, dts, h, rho_max, capped, limited, limiter,
-                            in_rate, in_acc, out_acc, ax, slope)
+                            in_rate, in_acc, out_acc, ax, slope, seed)
                 _fx.sweep_y(rho, wy, solid, dts, h, rho_max, capped, limited, limiter,
-                            in_rate, in_acc, out_acc, ay, slope)
+                            in_rate, in_acc, out_acc, ay, yrs)
             else:
                 _fx.sweep_y(rho, wy, solid, dts, h, rho_max, capped, limited, limiter,
-                            in_rate, in_acc, out_acc, ay, slope)
+                            in_rate, in_acc, out_acc, ay, yrs)
                 _fx.sweep_x(rho, wx, solid, dts, h, rho_max, capped, limited, limiter,
-                            in_rate, in_acc, out_acc, ax, slope)
+                            in_rate, in_acc, out_acc, ax, slope, seed)
             parity[0] += 1
+    for i in range(out_acc.size):
+        out_total[i] += out_acc[i]
 
 
 class MacroSim:
@@ -167,6 +200,11 @@ class MacroSim:
         self._dy = np.zeros((ny + 1, nx))
         self._gx = np.zeros((ny, nx + 1))
         self._gy = np.zeros((ny + 1, nx))
+        self._seed = np.zeros(max(nx, ny) + 1, dtype=np.uint8)
+        self._yr = np.zeros((ny + 1, 2), dtype=np.int64)
+        self._yr_op = np.zeros((ny + 1, 2), dtype=np.int64)
+        self._use_op = self.variant == 'goettlich'
+        self._limited = self.scheme == 'limited'
         self._lohi = np.zeros((ny, 2), dtype=np.int64)
         self._rng = np.zeros((ny, 2), dtype=np.int64)
         self._parity = np.zeros(1, dtype=np.int64)
@@ -176,6 +214,7 @@ class MacroSim:
         self.inflow = np.zeros(nb)
         self.outflow = np.zeros(nb)
         self._pending_out = np.zeros(nb)
+        self._has_pending = False
         self.outflow_total = np.zeros(nb)
         self.parts_in = 0.0
         self.parts_out = 0.0
@@ -296,20 +335,19 @@ class MacroSim:
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` twin steps; :attr:`inflow` / :attr:`outflow` hold this call's amounts."""
-        self.inflow.fill(0.0)
-        self.outflow.fill(0.0)
         advance(int(n), self.substeps, self.dt / self.substeps, self._parity, self._rho,
-                self._ux, self._uy, self._wx, self._wy, self.variant == 'goettlich',
-                self._solid, self.grid.h, self.rho_max, self.capacity_guard,
-                self.scheme == 'limited', self.limiter, self._in_rate, self.inflow,
-                self.outflow, self._ax, self._ay, self._slope, self.epsilon, self._w,
-                self._dx, self._dy, self._gx, self._gy, self._lohi, self._rng)
+                self._ux, self._uy, self._wx, self._wy, self._use_op, self._solid,
+                self.grid.h, self.rho_max, self.capacity_guard, self._limited, self.limiter,
+                self._in_rate, self.inflow, self.outflow, self.outflow_total, self._ax,
+                self._ay, self._slope, self._seed, self._yr, self._yr_op, self.epsilon,
+                self._w, self._dx, self._dy, self._gx, self._gy, self._lohi, self._rng)
         self.parts_in += float(self.inflow.sum())
         self.parts_out += float(self.outflow.sum())
-        self.outflow_total += self.outflow
-        # Actuator sweeps since the last call (already in parts_out / outflow_total).
-        self.outflow += self._pending_out
-        self._pending_out.fill(0.0)
+        if self._has_pending:
+            # Actuator sweeps since the last call (already in parts_out / outflow_total).
+            self.outflow += self._pending_out
+            self._pending_out.fill(0.0)
+            self._has_pending = False
         self.steps += int(n)
 
     def total_parts(self) -> float:
@@ -407,6 +445,7 @@ class MacroSim:
                                           self._wall_a, self._vc, self._ux, self._uy)
         np.copyto(self._wx, self._ux)
         np.copyto(self._wy, self._uy)
+        _fx.y_ranges(self._uy, self._yr)
         self._rng.fill(0)
         speed = self._smax + 2.0 * self.epsilon
         self.substeps = max(1, int(math.ceil(self.dt * speed / (self.grid.h * self.cfl)
@@ -455,6 +494,7 @@ class MacroSim:
                         face = 2 * g.ny + g.nx + ii
                     amount = m * g.h * g.h
                     self._pending_out[face] += amount
+                    self._has_pending = True
                     self.parts_out += amount
                     self.outflow_total[face] += amount
                     m = 0.0
