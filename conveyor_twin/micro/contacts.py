@@ -589,16 +589,16 @@ def detect(n, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, 
 
 
 @njit(cache=True, inline='always')
-def _effective(ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny):
-    """Return a contact's inverse normal and tangential effective masses [1/kg] and the change
-    of its tangential speed per unit normal impulse [1/kg]."""
+def _masses(ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny):
+    """Return a contact's inverse normal and tangential effective masses ``kn``, ``kt`` [1/kg]
+    and the change of its tangential speed per unit normal impulse [1/kg]."""
     rna = rax * ny - ray * nx
     rnb = rbx * ny - rby * nx
     rta = rax * nx + ray * ny
     rtb = rbx * nx + rby * ny
     kn = ima + imb + iia * rna * rna + iib * rnb * rnb
     kt = ima + imb + iia * rta * rta + iib * rtb * rtb
-    return 1.0 / kn, 1.0 / kt, iia * rna * rta + iib * rnb * rtb
+    return kn, kt, iia * rna * rta + iib * rnb * rtb
 
 
 @njit(cache=True)
@@ -616,6 +616,8 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp):
     shocking = passes >= 2
     last_vt = last_mu_k = last_mu_s = math.nan     # NaN: differs from everything
     last_ima = last_imb = math.nan
+    last_kn = last_kn_s = math.nan
+    last_ikn = last_ikn_s = 0.0
     slope = 0.0
     w = 0.0
     for c in range(nc):
@@ -636,17 +638,28 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp):
         rby = ct[c, CT_RBY]
         nx = ct[c, CT_NX]
         ny = ct[c, CT_NY]
-        ct[c, CT_IKN], ct[c, CT_IKT], ct[c, CT_CNT] = _effective(
-            ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny)
+        kn, kt, cnt = _masses(ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny)
+        # a disc's contact normal runs through its centre: the normal effective mass is the
+        # same for every contact of the same bodies' types, so its reciprocal is reused
+        if kn != last_kn:
+            last_kn = kn
+            last_ikn = 1.0 / kn
+        ct[c, CT_IKN] = last_ikn
+        ct[c, CT_IKT] = 1.0 / kt
+        ct[c, CT_CNT] = cnt
         ct[c, CT_FA_S] = 1.0
         if shocking and b >= 0:
             if key[a] > key[b]:
                 ct[c, CT_FA_S] = 0.0
-                ct[c, CT_IKN_S], ct[c, CT_IKT_S], ct[c, CT_CNT_S] = _effective(
-                    0.0, 0.0, imb, iib, rax, ray, rbx, rby, nx, ny)
+                kn, kt, cnt = _masses(0.0, 0.0, imb, iib, rax, ray, rbx, rby, nx, ny)
             else:
-                ct[c, CT_IKN_S], ct[c, CT_IKT_S], ct[c, CT_CNT_S] = _effective(
-                    ima, iia, 0.0, 0.0, rax, ray, rbx, rby, nx, ny)
+                kn, kt, cnt = _masses(ima, iia, 0.0, 0.0, rax, ray, rbx, rby, nx, ny)
+            if kn != last_kn_s:
+                last_kn_s = kn
+                last_ikn_s = 1.0 / kn
+            ct[c, CT_IKN_S] = last_ikn_s
+            ct[c, CT_IKT_S] = 1.0 / kt
+            ct[c, CT_CNT_S] = cnt
         else:
             ct[c, CT_IKN_S] = ct[c, CT_IKN]
             ct[c, CT_IKT_S] = ct[c, CT_IKT]
