@@ -22,6 +22,7 @@ from conveyor_twin.ros.coordinator_node import CoordinatorNode
 from conveyor_twin.ros.macro_node import MacroNode
 from conveyor_twin.ros.micro_node import MicroNode
 from conveyor_twin.ros.params import parameter_overrides
+from conveyor_twin.ros.qos import publish_failures
 
 
 def make_executor(context: Context):
@@ -90,8 +91,10 @@ class ComposedTwin:
 
     def counters(self) -> Dict[str, float]:
         """Part balance per scale: entered, left through sinks, in flight."""
-        micro = self.micro_stage.counters()
-        macro = self.macro_stage.counters()
+        micro = dict(self.micro_stage.counters(),
+                     publish_failures=publish_failures(self.micro_node))
+        macro = dict(self.macro_stage.counters(),
+                     publish_failures=publish_failures(self.macro_node))
         return {**{f'micro_{k}': v for k, v in micro.items()},
                 **{f'macro_{k}': v for k, v in macro.items()}}
 

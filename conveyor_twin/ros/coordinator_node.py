@@ -29,8 +29,8 @@ from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.coord.twin import Twin
 from conveyor_twin.ros import coupling
 from conveyor_twin.ros.params import declare_twin_parameters, DIAGNOSTICS_PERIOD_STEPS
-from conveyor_twin.ros.qos import (CLOCK_QOS, COMMAND_QOS, COUPLING_QOS, raw_publish,
-                                   SLOW_QOS, STREAM_QOS)
+from conveyor_twin.ros.qos import (CLOCK_QOS, COMMAND_QOS, COUPLING_QOS, publish_failures,
+                                   raw_publish, SLOW_QOS, STREAM_QOS)
 from conveyor_twin.wire import cdr
 
 REMOTE_STEP_TIMEOUT = 10.0        # s a split scale node may take to report a step done
@@ -70,9 +70,9 @@ class CoordinatorNode(Node):
         self.belt_pub = self.create_publisher(BeltStates, 'belt_states', STREAM_QOS)
         self.actuator_pub = self.create_publisher(ActuatorStates, 'actuator_states', STREAM_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', SLOW_QOS)
-        self._pub_clock = raw_publish(self.clock_pub)
-        self._pub_belts = raw_publish(self.belt_pub)
-        self._pub_actuators = raw_publish(self.actuator_pub)
+        self._pub_clock = raw_publish(self.clock_pub, self.get_logger())
+        self._pub_belts = raw_publish(self.belt_pub, self.get_logger())
+        self._pub_actuators = raw_publish(self.actuator_pub, self.get_logger())
         self.create_subscription(BeltCommand, 'belt_command', self._on_belt_command,
                                  COMMAND_QOS)
         self.create_subscription(ActuatorCommand, 'actuator_command',
@@ -129,8 +129,10 @@ class CoordinatorNode(Node):
             'rejected_commands': str(self.twin.commands.rejected_total),
             'last_rejection': self.twin.commands.last_rejection,
         }
+        counters = self._counters()
+        values['publish_failures'] = str(self.publish_failures(counters))
         values.update({k: f'{v:g}' if isinstance(v, float) else str(v)
-                       for k, v in self._counters().items()})
+                       for k, v in counters.items()})
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if self.runner.overruns else DiagnosticStatus.OK,
             name='conveyor_twin: scale_coordinator', hardware_id=self.twin.cell.settings.name,
@@ -299,9 +301,16 @@ class CoordinatorNode(Node):
             raise ValueError(reply[1:].decode())
         return np.frombuffer(reply[1:], '<u4')
 
+    def publish_failures(self, counters: Dict[str, float]) -> int:
+        """Publishes refused by the middleware: this node's and the scale nodes' (counters
+        ending in ``publish_failures``)."""
+        return publish_failures(self) + int(sum(
+            v for k, v in counters.items() if k.endswith('publish_failures')))
+
     def summary(self) -> dict:
         """Return the run's closing figures as a JSON-ready dict."""
         total = self.runner.stats.total()
+        counters = self._counters()
         return {
             'cell': self.twin.cell.settings.name, 'seed': self.twin.seed,
             'mode': self.runner.mode.value, 'steps': self.twin.step_index,
@@ -311,7 +320,8 @@ class CoordinatorNode(Node):
             'real_time_factor': round(self.runner.real_time_factor(), 4),
             'realtime_priority': self.runner.priority,
             'rejected_commands': self.twin.commands.rejected_total,
-            **self._counters(),
+            'publish_failures': self.publish_failures(counters),
+            **counters,
         }
 
 

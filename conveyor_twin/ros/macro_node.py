@@ -22,7 +22,7 @@ class MacroNode(ScaleNode):
                                                  g.resolution, g.nx, g.ny)
                           for g in stage.grids]
         self.density_pub = self.create_publisher(DensityGrid, 'density', STREAM_QOS)
-        self._pub_density = raw_publish(self.density_pub)
+        self._pub_density = raw_publish(self.density_pub, self.get_logger())
 
     def publish_step(self, inp: StepInput) -> None:
         """Publish every macro zone's density for the step just taken."""

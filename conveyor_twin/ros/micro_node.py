@@ -40,10 +40,10 @@ class MicroNode(ScaleNode):
         self.edge_pub = self.create_publisher(LightBarrierEdge, 'light_barrier_edges',
                                               EDGE_QOS)
         self.markers_pub = self.create_publisher(MarkerArray, 'markers', SLOW_QOS)
-        self._pub_parts = raw_publish(self.parts_pub)
-        self._pub_barriers = raw_publish(self.barrier_pub)
-        self._pub_edge = raw_publish(self.edge_pub)
-        self._pub_markers = raw_publish(self.markers_pub)
+        self._pub_parts = raw_publish(self.parts_pub, self.get_logger())
+        self._pub_barriers = raw_publish(self.barrier_pub, self.get_logger())
+        self._pub_edge = raw_publish(self.edge_pub, self.get_logger())
+        self._pub_markers = raw_publish(self.markers_pub, self.get_logger())
         self._markers_due = None
         self.markers_priority = 0  # SCHED_FIFO priority of the markers thread (0: normal)
         self._markers_closed = False

@@ -29,6 +29,7 @@ from conveyor_twin.coord.commands import ACTUATOR, BELT, Command, CommandRejecte
 from conveyor_twin.record import topics as contract
 from conveyor_twin.record.errors import RecordingError
 from conveyor_twin.record.writer import McapRecorder
+from conveyor_twin.ros.qos import RawPublisher
 from conveyor_twin.wire import cdr
 
 #: (node attribute of ComposedTwin, publisher attribute of that node) of every published stream.
@@ -75,15 +76,11 @@ class TapPublisher:
 
 
 def _replace_raw_publishers(node: Any, publisher: Any, proxy: TapPublisher) -> None:
-    """Route a node's shortcuts to ``publisher.handle.publish_raw`` (``ros.qos.raw_publish``)
+    """Route a node's :class:`~conveyor_twin.ros.qos.RawPublisher` shortcuts of ``publisher``
     through the proxy, whatever the node calls them."""
-    handle = getattr(publisher, 'handle', None)
-    if handle is None:
-        return
-    for name, value in list(vars(node).items()):
-        if getattr(value, '__self__', None) is handle and \
-                getattr(value, '__name__', '') == 'publish_raw':
-            setattr(node, name, proxy.publish_raw)
+    for value in list(vars(node).values()):
+        if isinstance(value, RawPublisher) and value.publisher is publisher:
+            value.send = proxy.publish_raw
 
 
 def tap(composed: Any, sink: Sink, *, forward: bool = True) -> Dict[str, contract.TopicSpec]:

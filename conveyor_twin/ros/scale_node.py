@@ -10,7 +10,7 @@ from conveyor_twin.cell import load_cell
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.ros import coupling
 from conveyor_twin.ros.params import declare_twin_parameters
-from conveyor_twin.ros.qos import COUPLING_QOS
+from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures
 
 MICRO_ROLE = 1
 MACRO_ROLE = 2
@@ -74,7 +74,8 @@ class ScaleNode(Node):
             self.stage.advance(inp)
             self.publish_step(inp)
             step = inp.step
-            reply = encode_counters(self.stage.counters())
+            reply = encode_counters(dict(self.stage.counters(),
+                                         publish_failures=publish_failures(self)))
         elif kind == coupling.RESET:
             seed = int.from_bytes(body[:8], 'little')
             cell_file = body[8:].decode()

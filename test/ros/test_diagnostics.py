@@ -12,7 +12,7 @@ from test.ros_env import wait_for
 
 pytestmark = pytest.mark.ros
 KEYS = {'step', 'mode', 'step_time_mean_ms', 'step_time_p99_ms', 'step_time_max_ms',
-        'overruns', 'real_time_factor', 'rejected_commands', 'last_rejection',
+        'overruns', 'real_time_factor', 'rejected_commands', 'last_rejection', 'publish_failures',
         'micro_entered', 'micro_left', 'micro_in_flight',
         'macro_entered', 'macro_left', 'macro_in_flight'}
 
