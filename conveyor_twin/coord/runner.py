@@ -126,6 +126,7 @@ class Runner:
             self.priority = raise_thread_priority(realtime_priority())
             freeze_heap()
         self.pacer.restart()
+        self.wall_start = time.monotonic()  # after the set-up above: rtf counts stepping only
         try:
             while not self._stop.is_set():
                 if self.max_steps is not None and self.steps_done >= self.max_steps:
