@@ -110,28 +110,28 @@ def restore_faces(wx: np.ndarray, wy: np.ndarray, ux: np.ndarray, uy: np.ndarray
 def full_rows(rho: np.ndarray, full: float, lohi: np.ndarray) -> bool:
     """Store per row the column range ``[lo, hi)`` of cells with ``rho >= full``.
 
+    ``(0, 0)`` for a row without such a cell. One branch-free min/max pass per row (it
+    vectorises).
+
     :return: True if there is any such cell.
     """
     ny, nx = rho.shape
     found = False
     for j in range(ny):
         row = rho[j]
-        count = 0
+        lo = nx
+        hi = 0
         for i in range(nx):
-            count += row[i] >= full       # branch-free: vectorises
-        if count == 0:
+            is_full = row[i] >= full
+            lo = min(lo, i if is_full else nx)
+            hi = max(hi, i + 1 if is_full else 0)
+        if hi > lo:
+            found = True
+            lohi[j, 0] = lo
+            lohi[j, 1] = hi
+        else:
             lohi[j, 0] = 0
             lohi[j, 1] = 0
-            continue
-        found = True
-        for i in range(nx):
-            if row[i] >= full:
-                lohi[j, 0] = i
-                break
-        for i in range(nx - 1, -1, -1):
-            if row[i] >= full:
-                lohi[j, 1] = i + 1
-                break
     return found
 
 
@@ -146,7 +146,7 @@ def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: 
     ``grad(eta * rho)`` is computed as ``eta * grad(rho)``: the face differences of ``rho``
     (zero across faces touching a solid cell: no gradient through a wall) mollified with the
     separable taps ``w`` along both axes. Work is confined, row by row, to the full cells grown
-    by ``K = 2 r + 3`` cells (Chebyshev), enough for every value the operator faces use to be
+    by ``K = r + 1`` cells (Chebyshev), enough for every value the operator faces use to be
     computed from fresh inputs; the faces set by the previous call (those of ``lohi``) are
     first reset to the belt field ``ux``, ``uy``.
 
@@ -168,7 +168,12 @@ def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: 
             rng[j, 1] = 0
         return False
     r = (w.size - 1) // 2
-    grow = 2 * r + 3
+    # An operator face reads mollified gradients at most one cell off the full cells' ranges
+    # (the four tangential neighbours); each is a sum of r taps along y of sums of r taps
+    # along x. With the work range of every row covering the full cells of the rows within
+    # r + 1, grown by r + 1, every value an operator face reads is a complete sum of fresh
+    # differences (the ranges of the rows the y taps reach cover it with r columns to spare).
+    grow = r + 1
     for j in range(ny):
         a = nx
         b = 0
@@ -189,18 +194,24 @@ def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: 
         b = rng[j, 1]
         if b <= a:
             continue
-        for f in range(a, b + 1):
-            d = 0.0
-            if 0 < f < nx and solid[j, f - 1] == 0 and solid[j, f] == 0:
-                d = (rho[j, f] - rho[j, f - 1]) * inv_h
-            dx[j, f] = d
+        if a == 0:
+            dx[j, 0] = 0.0
+        if b == nx:
+            dx[j, nx] = 0.0
+        for f in range(max(a, 1), min(b, nx - 1) + 1):
+            ok = (solid[j, f - 1] == 0) & (solid[j, f] == 0)
+            d = (rho[j, f] - rho[j, f - 1]) * inv_h
+            dx[j, f] = d if ok else 0.0
     for f in range(ny + 1):
         a, b = _face_row_range(rng, f, ny)
+        if f == 0 or f == ny:
+            for i in range(a, b):
+                dy[f, i] = 0.0
+            continue
         for i in range(a, b):
-            d = 0.0
-            if 0 < f < ny and solid[f - 1, i] == 0 and solid[f, i] == 0:
-                d = (rho[f, i] - rho[f - 1, i]) * inv_h
-            dy[f, i] = d
+            ok = (solid[f - 1, i] == 0) & (solid[f, i] == 0)
+            d = (rho[f, i] - rho[f - 1, i]) * inv_h
+            dy[f, i] = d if ok else 0.0
     # Separable mollification: along x into gx / gy, then along y back into dx / dy. Each
     # output is the sum over the taps in tap order, skipping taps outside the region (the
     # grid); the loops run tap by tap over contiguous memory, which gives the same sums.
