@@ -191,11 +191,13 @@ def window_candidate(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.
     not part of any window (macro cells when ``acc`` is the density). ``ranges`` ``(m, 4)``
     holds ``(j0, j1, i0, i1)`` blocks of cells to scan (row-major within a block); ``cur``
     ``(2,)`` is the cursor (block, flat index in the block) to start from and is left on the
-    cell found. The window is the ``(2 w + 1)^2`` block around the cell. ``out`` receives
+    cell found. The window is the ``(2 w + 1)^2`` block around the cell; only cells holding at
+    least ``threshold / (2 w + 1)^2`` are tried as centres. ``out`` receives
     ``(j, i, sum [parts], centroid_j, centroid_i)`` (centroid in cells, mass-weighted).
     Return False when no window from the cursor on holds ``threshold + thr[j, i]`` [parts].
     """
     ny, nx = acc.shape
+    min_centre = threshold / ((2 * w + 1) * (2 * w + 1))
     while cur[0] < ranges.shape[0]:
         j0, j1, i0, i1 = ranges[cur[0], 0], ranges[cur[0], 1], ranges[cur[0], 2], ranges[cur[0], 3]
         bw = i1 - i0
@@ -203,7 +205,9 @@ def window_candidate(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.
         for flat in range(cur[1], size):
             j = j0 + flat // bw
             i = i0 + flat - (flat // bw) * bw
-            if acc[j, i] <= 0.0 or skip[j, i]:
+            # a window holding a part has a cell with 1 / (2 w + 1)^2 of it: only windows
+            # centred on such cells are tried (thin density is not scanned cell by cell)
+            if acc[j, i] * unit < min_centre or skip[j, i]:
                 continue
             total = 0.0
             cj = 0.0
@@ -251,7 +255,8 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
                     released_by_type: np.ndarray, thr: np.ndarray, rng: np.ndarray, counters,
                     ids, ptype, P,
                     pt, shp, shp_verts, act_state, act_verts, va, vb, out) -> np.ndarray:
-    """Release whole parts wherever a window of ``acc`` holds one; return (released, failed).
+    """Release whole parts wherever a window of ``acc`` holds one; return (released, failed,
+    windows tried).
 
     Only the cells of ``ranges`` are scanned (see :func:`window_candidate`; ``skip`` and
     ``unit`` as there). A part goes to ``(ox + (ci + 0.5) h, oy + (cj + 0.5) h)`` [m] (the
@@ -277,13 +282,14 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
     same uniform density do not release in lock-step. The remaining arguments are those of
     :func:`conveyor_twin.micro.sources.place`.
     """
-    res = np.zeros(2, dtype=np.int64)
+    res = np.zeros(3, dtype=np.int64)
     cur = np.zeros(2, dtype=np.int64)
     gnx = active.shape[1]
     gny = active.shape[0]
     while res[1] < max_fail:
         if not window_candidate(acc, skip, unit, ranges, cur, w, 1.0, thr, cand):
             break
+        res[2] += 1
         j = int(cand[0])
         i = int(cand[1])
         total = cand[2]
@@ -309,6 +315,21 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
         rt = pt[t, PT_BRAD]
         ok = False
         k = offsets.shape[0]
+        # any spot off the macro cells? (else the window waits, without a look at the parts)
+        usable = False
+        for oi in range(k):
+            if offsets[oi, 1] < 0.0:
+                continue
+            px = x + d * (offsets[oi, 0] * tx + offsets[oi, 1] * ex)
+            py = y + d * (offsets[oi, 0] * ty + offsets[oi, 1] * ey)
+            fx = (px - grid[0]) / grid[2]
+            fy = (py - grid[1]) / grid[2]
+            if not (0.0 <= fx < gnx and 0.0 <= fy < gny and active[int(fy), int(fx)]):
+                usable = True
+                break
+        if not usable:
+            cur[1] += 1
+            continue
         # the parts near the window, so most candidates are refused without a full check
         reach = d * (np.abs(offsets).max() + 1.0) + 2.0 * rt + d
         n = counters[C_N]
