@@ -119,3 +119,28 @@ def test_split_streams_are_consecutive_and_identical_to_composed_and_reruns(
     assert split == composed, _logs(tmp_path)
     split_rerun, _, _ = run_split(ros_context, ros_processes, tmp_path, 's2')
     assert split_rerun == composed
+
+
+def test_split_refuses_a_cell_with_macro_zones_rather_than_run_it_uncoupled(tmp_path):
+    import subprocess
+
+    import yaml
+
+    from conveyor_twin.cell import default_cell_text
+    from conveyor_twin.ros.split import refusal
+    from test.ros_env import ros_subprocess_env
+    assert refusal(load_cell()) is None
+    doc = yaml.safe_load(default_cell_text())
+    doc['zones'][0]['policy'] = 'auto'
+    path = tmp_path / 'auto_cell.yaml'
+    path.write_text(yaml.safe_dump(doc))
+    cell = load_cell(str(path))
+    assert "'belt' (auto)" in refusal(cell)
+    for argv in (['-m', 'conveyor_twin.cli', 'run', '--split', '--cell', str(path),
+                  '--duration', '0.01'],
+                 ['-m', 'conveyor_twin.ros.split', '--ros-args', '-p', f'cell_file:={path}']):
+        done = subprocess.run([sys.executable] + argv, env=ros_subprocess_env(),
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 2, done.stderr
+        assert 'does not couple the micro and macro scales' in done.stderr
+        assert "'belt' (auto)" in done.stderr and 'without --split' in done.stderr
