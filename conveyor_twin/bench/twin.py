@@ -261,7 +261,8 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
     figures.update(_window_figures(result['diagnostics']))
     if summary is not None:
         figures['twin_summary'] = {k: summary.get(k) for k in
-                                   ('steps', 'overruns', 'real_time_factor', 'step_time_ms')}
+                                   ('steps', 'overruns', 'real_time_factor', 'step_time_ms',
+                                    'publish_failures')}
     return figures
 
 
