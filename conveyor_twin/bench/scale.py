@@ -10,15 +10,14 @@ then the policy runs. Each case runs ``--warmup`` steps, then ``--steps`` timed 
 whole :class:`~conveyor_twin.coord.twin.Twin` (micro, macro, hand-over, ledger); the table
 gives median, p99 and mean per 1 ms step and the parts on the cell at the end.
 
-Measured here (2 shared cores, load average 3-5 from other jobs; three runs, medians with p99
-in brackets): pure micro 5,000 parts 0.46-0.67 ms, 20,000 parts 1.8-7.9 ms; multi-scale
-5,000 parts 0.54-0.74 ms (1.4-5.6), 20,000 parts 0.73-0.88 ms (1.5-8), 100,000 parts
-1.33-1.62 ms (4.1-9.8) with ~1,060 micro parts in the sensor windows. The target (100,000
-parts, median <= 1 ms, p99 <= 1.5 ms) is not met: at 100,000 parts the micro step costs
-~0.5 ms (it scales with the micro broad-phase grid over the whole 30 m cell: 1,000 parts take
-0.14 / 0.38 / 0.69 ms on 6 / 30 / 60 m), the macro step ~0.14 ms and the hand-over ~0.3 ms.
-Speed-up over pure micro at 5,000 parts: 0.85-1.14x (free flow is cheap at the micro scale);
-at 20,000 parts 2.3-11x.
+Measured here (2 shared cores, load average 3-3.5 from other jobs, one full run after the
+hand-over rework of issue 6's last gaps, medians with p99 in brackets): pure micro 5,000 parts
+0.13 ms (0.66); multi-scale 5,000 parts 0.50 ms (1.5), 100,000 parts 0.48 ms (1.2) with ~1,070
+micro parts in the sensor windows. The 100,000-part target (median <= 1 ms, p99 <= 1.5 ms) was
+met in that run (an earlier run at load ~1.5 before the rework: 0.58 ms, p99 3.0 ms). At 5,000
+parts pure micro is faster than multi-scale (speed-up 0.3x; 0.8x in the earlier run): free
+flow is cheap at the micro scale and the hand-over releases ~5 parts per step at the sensor
+windows, each placement checked against the micro parts.
 """
 
 import argparse
