@@ -234,10 +234,19 @@ def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: 
             wk = w[k + r]
             for i in range(max(a, a - k), min(b, b - k)):
                 gy[f, i] += wk * dy[f, i + k]
+    # The y pass only where the operator faces read its result: x faces of the full cells'
+    # ranges of rows j - 1 .. j + 1 (tangential neighbours of the y faces), and y faces one
+    # column beyond the ranges of their two rows.
     for j in range(ny):
-        a = rng[j, 0]
-        b = rng[j, 1]
-        if b <= a:
+        a = nx
+        b = -1
+        for jj in range(max(0, j - 1), min(ny, j + 2)):
+            if lohi[jj, 1] > lohi[jj, 0]:
+                a = min(a, lohi[jj, 0])
+                b = max(b, lohi[jj, 1])
+        a = max(a, rng[j, 0])
+        b = min(b, rng[j, 1])
+        if b < a:
             continue
         for f in range(a, b + 1):
             dx[j, f] = 0.0
@@ -248,7 +257,12 @@ def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: 
                 for f in range(a, b + 1):
                     dx[j, f] += wk * gx[jj, f]
     for f in range(ny + 1):
-        a, b = _face_row_range(rng, f, ny)
+        a, b = _face_row_range(lohi, f, ny)
+        if b <= a:
+            continue
+        ra, rb = _face_row_range(rng, f, ny)
+        a = max(a - 1, ra)
+        b = min(b + 1, rb)
         for i in range(a, b):
             dy[f, i] = 0.0
         for k in range(-r, r + 1):
