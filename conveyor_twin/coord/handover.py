@@ -7,8 +7,8 @@ macro now) and the grid's ``solid`` mask (1: obstacle or engaged actuator).
 - :func:`capture_mask` marks the micro parts whose centre lies in an active cell;
 - :func:`deposit_disc` adds exactly one part's worth of mass over the footprint disc of a
   captured part, restricted to active fluid cells (renormalised, so the amount is exact);
-- :func:`take_inactive` moves the mass that flowed into inactive cells into per-cell
-  accumulators (it is released there as whole parts);
+- :func:`hold_back` pushes density in inactive (micro) cells back upstream where the micro
+  parts there leave no room;
 - :func:`window_candidate` finds where an accumulator window holds at least one part, and
   :func:`window_subtract` removes one part from it (proportionally, so nothing goes negative).
 """
@@ -100,22 +100,6 @@ def deposit_disc(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: flo
                     rho[j, i] += amount * inv
                     return
     rho[jc, ic] += amount * inv  # no active fluid cell at all: keep the mass anyway
-
-
-@njit(cache=True)
-def take_inactive(rho: np.ndarray, active: np.ndarray, h: float, acc: np.ndarray) -> float:
-    """Move the mass of inactive cells into ``acc`` (per cell); return the total [parts]."""
-    ny, nx = rho.shape
-    hh = h * h
-    total = 0.0
-    for j in range(ny):
-        for i in range(nx):
-            if not active[j, i] and rho[j, i] != 0.0:
-                m = rho[j, i] * hh
-                acc[j, i] += m
-                total += m
-                rho[j, i] = 0.0
-    return total
 
 
 @njit(cache=True)
