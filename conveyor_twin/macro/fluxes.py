@@ -33,6 +33,11 @@ import numpy as np
 LIMITER_MINMOD = 0
 LIMITER_MC = 1
 LIMITER_VANLEER = 2
+# Relative margin of the pre-check that bounds where a receiver cut can start: a cell's
+# ``rho + inflow`` and its cut condition are rounded differently, by a few ulps of the
+# densities involved; 1e-12 covers densities up to ~1000 rho_max (above rho_max every cell
+# with inflow passes the pre-check anyway).
+EXCESS_MARGIN = 1e-12
 
 
 @njit(cache=True)
@@ -55,13 +60,17 @@ def limited_slope(dl: float, dr: float, limiter: int) -> float:
 
 @njit(cache=True)
 def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float,
-                  has_negative: bool, hi: int, seed: np.ndarray) -> None:
+                  has_negative: bool, lo: int, hi: int, seed: np.ndarray) -> None:
     """Receiver cut of one line (faces ``0..n``, cells ``0..n-1``).
 
     :param has_negative: False if no face amount is negative (the second pass is skipped).
     :param hi: one past the last cell that could overflow (:func:`_line_excess`): the
         downstream-first pass starts there, as every face downstream of it is left unchanged
         (a cell that cannot overflow, with its downstream face unchanged, keeps its inflow).
+    :param lo: the first cell whose ``rho + inflow`` exceeds ``rho_max (1 - EXCESS_MARGIN)``
+        (:func:`_line_excess`): no face upstream of it meets its cut condition on the
+        demands (the margin covers the rounding of both tests), so only chains of cuts reach
+        there.
     :param seed: uint8 work ``(>= n + 1,)``.
 
     A face is cut only if its receiver overflows, with the receiver's downstream face as it is
@@ -71,7 +80,7 @@ def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float,
     faces upstream of a cut face; the others would be visited without effect. The same
     arithmetic as a visit of every face, so the same results bit for bit.
     """
-    for f in range(hi):
+    for f in range(lo, hi):
         af = a[f]
         ar = a[f + 1]
         base = rho_max - rho[f]
@@ -85,9 +94,9 @@ def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float,
     dirty = False
     while f >= 0:
         if not dirty:
-            while f >= 0 and seed[f] == 0:
+            while f >= lo and seed[f] == 0:
                 f -= 1
-            if f < 0:
+            if f < lo:
                 break
         af = a[f]
         dirty = False
@@ -128,17 +137,21 @@ def _cap_line_pos(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float,
 
 
 @njit(cache=True)
-def _line_excess(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float) -> int:
-    """Return one past the last cell of one line whose ``rho + inflow`` exceeds ``rho_max``
-    (0: none).
+def _line_excess(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float):
+    """Return ``(lo, hi)``: ``hi`` is one past the last cell of one line whose
+    ``rho + inflow`` exceeds ``rho_max`` (0: none), ``lo`` the first whose ``rho + inflow``
+    exceeds ``rho_max (1 - EXCESS_MARGIN)`` (``n``: none).
 
-    Written as a branch-free integer max-reduction so that it vectorises.
+    Written as branch-free integer min/max-reductions so that it vectorises.
     """
+    thr = rho_max * (1.0 - EXCESS_MARGIN)
+    lo = n
     hi = 0
     for i in range(n):
         v = rho[i] + max(a[i], 0.0) - min(a[i + 1], 0.0)
         hi = max(hi, (i + 1) * (v > rho_max))
-    return hi
+        lo = min(lo, i if v > thr else n)
+    return lo, hi
 
 
 @njit(cache=True)
@@ -258,10 +271,10 @@ def sweep_x(rho: np.ndarray, wx: np.ndarray, solid: np.ndarray, dts: float, h: f
                 negative += w < 0.0
                 aj[f] = w * k * (r[f - 1] if w > 0.0 else r[f])
         if capped:
-            hi = _line_excess(aj, r, nx, rho_max)
+            lo, hi = _line_excess(aj, r, nx, rho_max)
             if hi > 0:
                 negative += (aj[0] < 0.0) + (aj[nx] < 0.0)
-                _cap_line_pos(aj, r, nx, rho_max, negative > 0, hi, seed)
+                _cap_line_pos(aj, r, nx, rho_max, negative > 0, lo, hi, seed)
         for i in range(nx):
             r[i] += aj[i] - aj[i + 1]
         a0 = aj[0]
