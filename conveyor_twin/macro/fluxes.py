@@ -142,16 +142,19 @@ def _line_excess(a: np.ndarray, rho: np.ndarray, n: int, rho_max: float):
     ``rho + inflow`` exceeds ``rho_max`` (0: none), ``lo`` the first whose ``rho + inflow``
     exceeds ``rho_max (1 - EXCESS_MARGIN)`` (``n``: none).
 
-    Written as branch-free integer min/max-reductions so that it vectorises.
+    Written as branch-free 32-bit integer min/max-reductions so that it vectorises (64-bit
+    integer min/max has no AVX2 instruction).
     """
     thr = rho_max * (1.0 - EXCESS_MARGIN)
-    lo = n
-    hi = 0
+    none = np.int32(n)
+    lo = none
+    hi = np.int32(0)
     for i in range(n):
         v = rho[i] + max(a[i], 0.0) - min(a[i + 1], 0.0)
-        hi = max(hi, (i + 1) * (v > rho_max))
-        lo = min(lo, i if v > thr else n)
-    return lo, hi
+        ii = np.int32(i)
+        hi = max(hi, ii + np.int32(1) if v > rho_max else np.int32(0))
+        lo = min(lo, ii if v > thr else none)
+    return int(lo), int(hi)
 
 
 @njit(cache=True)
