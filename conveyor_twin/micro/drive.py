@@ -59,9 +59,9 @@ def ramp(value, target, limit):
             value[i] -= limit[i]
 
 
-@njit(cache=True)
-def surface_velocity(belts, speed, px, py, floor_mu):
-    """Return (v_x, v_y, mu) of the surface under the point p [m]: a belt's or the floor's."""
+@njit(cache=True, inline='always')
+def belt_under(belts, px, py):
+    """Return the index of the first belt whose surface holds the point p [m], or -1."""
     for b in range(belts.shape[0]):
         rx = px - belts[b, BT_SX]
         ry = py - belts[b, BT_SY]
@@ -70,23 +70,45 @@ def surface_velocity(belts, speed, px, py, floor_mu):
         u = rx * dx + ry * dy
         w = ry * dx - rx * dy
         if 0.0 <= u <= belts[b, BT_LENGTH] and abs(w) <= belts[b, BT_HALF_WIDTH]:
-            return speed[b] * dx, speed[b] * dy, belts[b, BT_MU]
+            return b
+    return -1
+
+
+@njit(cache=True)
+def surface_velocity(belts, speed, px, py, floor_mu):
+    """Return (v_x, v_y, mu) of the surface under the point p [m]: a belt's or the floor's."""
+    b = belt_under(belts, px, py)
+    if b >= 0:
+        return speed[b] * belts[b, BT_DX], speed[b] * belts[b, BT_DY], belts[b, BT_MU]
     return 0.0, 0.0, floor_mu
 
 
 @njit(cache=True)
-def belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, speed, mp, acc):
+def belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, speed, mp, acc, key):
     """Apply one substep of surface friction to parts 0..n-1 (velocities in place).
 
     :param speed: float64[B] actual belt speeds [m/s]. :param mp: model parameters.
     :param acc: activities; the belt's gets ``|F . slip| dt`` when tracking.
+    :param key: float64[capacity] (output): each part's position along the direction of the
+        belt under it [m], as :func:`belt_key` (found with the same belt look-up).
     """
     g_dt = mp[MP_GRAVITY] * mp[MP_DT]
     floor_mu = mp[MP_FLOOR_MU]
     track = mp[MP_TRACK] != 0.0
+    nb = belts.shape[0]
     for i in range(n):
         t = ptype[i]
-        bvx, bvy, mu = surface_velocity(belts, speed, x[i], y[i], floor_mu)
+        b = belt_under(belts, x[i], y[i])
+        if b >= 0:
+            bvx = speed[b] * belts[b, BT_DX]
+            bvy = speed[b] * belts[b, BT_DY]
+            mu = belts[b, BT_MU]
+            key[i] = x[i] * belts[b, BT_DX] + y[i] * belts[b, BT_DY]
+        else:
+            bvx = 0.0
+            bvy = 0.0
+            mu = floor_mu
+            key[i] = x[i] * belts[0, BT_DX] + y[i] * belts[0, BT_DY] if nb else x[i]
         dvx = bvx - vx[i]
         dvy = bvy - vy[i]
         d = math.sqrt(dvx * dvx + dvy * dvy)

@@ -25,7 +25,7 @@ from conveyor_twin.micro.actuators import actuator_shapes, AP_LENGTH, AP_WIDTH
 from conveyor_twin.micro.contacts import (A_INERTIA, correct_positions, detect, MODE_PENALTY,
                                           MP_DT, MP_TRACK, penalty_forces, prepare_contacts,
                                           solve_impulses, update_pairs)
-from conveyor_twin.micro.drive import belt_drive, belt_key, ramp
+from conveyor_twin.micro.drive import belt_drive, ramp
 from conveyor_twin.micro.sensors import update_barriers
 from conveyor_twin.micro.sinks import leave
 from conveyor_twin.micro.sources import run_sources
@@ -150,7 +150,9 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
                     t = ptype[i]
                     ke[i] = 0.5 * ((vx[i] * vx[i] + vy[i] * vy[i]) / pt[t, PT_INV_MASS]
                                    + wz[i] * wz[i] / pt[t, PT_INV_INERTIA])
-            belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, belt_v[BV_SPEED], mp, acc)
+            # also the parts' keys along their belts (positions do not change until the
+            # integration, so they are those belt_key would give at the contacts' detection)
+            belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, belt_v[BV_SPEED], mp, acc, key)
             if mode == MODE_PENALTY:
                 for i in range(n):
                     fx[i] = 0.0
@@ -171,7 +173,6 @@ def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, ap
                     vy[i] += h * fy[i] * pt[t, PT_INV_MASS]
                     wz[i] += h * tz[i] * pt[t, PT_INV_INERTIA]
             else:
-                belt_key(n, x, y, belts, key)
                 prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp)
                 solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc)
             for i in range(n):

@@ -55,8 +55,10 @@ PENALTY_OMEGA_DT = 0.5
 CONTACT_PASSES = 2
 # Neighbour list skin as a fraction of the smallest part radius: a part may move 0.49 of it
 # before the list is rebuilt (in a jam it lives for many steps; in free flow at 0.5 m/s with
-# 10 mm discs and 1 ms steps it is rebuilt every second step).
-SKIN_FRACTION = 0.4
+# 10 mm discs and 1 ms steps it is rebuilt every fourth step). 0.8 against 0.4: the 1000-disc
+# bench scene's approach to the jam (everything moving) 1.16x faster than without a list
+# instead of 0.77x, the settled jam alike.
+SKIN_FRACTION = 0.8
 # Most substeps per step (impulse: travel; penalty: stability).
 MAX_SUBSTEPS_IMPULSE = 64
 MAX_SUBSTEPS_PENALTY = 1_000_000
