@@ -88,6 +88,9 @@ def _merge_y_ranges(yr: np.ndarray, lohi: np.ndarray, out: np.ndarray) -> None:
         out[f, 1] = hi
 
 
+# numba keys the on-disk cache of ``advance`` on this file only, and ``advance`` compiles the
+# kernels of fluxes.py and collision.py into itself: after editing those, change this file (or
+# clear ``__pycache__``), or ``advance`` keeps running the old kernels from the cache.
 @njit(cache=True)
 def advance(nsteps: int, nsub: int, dts: float, parity: np.ndarray, rho: np.ndarray,
             ux: np.ndarray, uy: np.ndarray, wx: np.ndarray, wy: np.ndarray, use_op: bool,
