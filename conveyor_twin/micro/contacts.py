@@ -371,7 +371,7 @@ NB_MOVE = 0.49
 
 
 def neighbour_arrays(capacity: int):
-    """Return the neighbour list of :func:`update_pairs`: (``nbr`` int64, ``pos0`` (2, capacity))."""
+    """Return the arrays of :func:`update_pairs`: ``nbr`` (int64) and ``pos0`` (2, capacity)."""
     size = NB_HEADER + 2 * capacity + 1 + CONTACTS_PER_PART * capacity
     return np.zeros(size, dtype=np.int64), np.zeros((2, capacity))
 
