@@ -53,7 +53,7 @@ scheduler's time slice); the thread-CPU median is 0.22-0.26 ms, the uncontended 
 states bit for bit): medians 0.234 against 0.314 ms at N = 1000 (1.34x), 0.76 against 1.49 ms
 at N = 5000 (1.95x), 0.022 against 0.024 ms at N = 100; while the 1000 discs still move
 into the jam (list rebuilt every few steps) 1.16x; the default cell (113 parts in free flow)
-0.016 against 0.017 ms.
+0.014 against 0.017 ms.
 Deepest overlap in the jam: 0.12 mm (N=100), 0.17 mm (N=1000), 0.39 mm (N=5000), slop 0.1 mm.
 Largest step, N = 100, 0.3 s: impulse 1e-3 s (2e-3 s overlaps 2.3 mm; impact exact);
 penalty at k = 1e5 N/m picked by activity (springs/least active physical element = 0.0046):
