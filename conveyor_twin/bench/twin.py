@@ -213,8 +213,32 @@ def _signal_group(pid: int, sig: int) -> None:
         pass
 
 
+def cpu_times() -> Optional[List[int]]:
+    """Return the machine's aggregate CPU times (``/proc/stat`` line ``cpu``, jiffies), or
+    None where there is no such file."""
+    try:
+        with open('/proc/stat') as f:
+            return [int(v) for v in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+
+
+def steal_percent(before: Optional[List[int]], after: Optional[List[int]]) -> Optional[float]:
+    """Return the share of CPU time the hypervisor gave to others between two
+    :func:`cpu_times` readings (``steal``, the 8th field) [%], or None if unknown."""
+    if not before or not after or len(before) < 8:
+        return None
+    total = sum(after[:8]) - sum(before[:8])
+    return round(100.0 * (after[7] - before[7]) / total, 2) if total > 0 else None
+
+
 def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[str, object]:
-    """Run the twin in one layout and the subscriber process; return the figures."""
+    """Run the twin in one layout and the subscriber process; return the figures.
+
+    ``steal_percent``: CPU time taken by the hypervisor for other guests during the run (on a
+    virtual machine the twin cannot be scheduled then, whatever its priority).
+    """
+    cpu_before = cpu_times()
     env = dict(os.environ)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     cell = quiet_cell_file(directory)
@@ -247,7 +271,8 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
     for line in out.splitlines():
         if line.startswith('{'):
             summary = json.loads(line)
-    figures: Dict[str, object] = {'layout': 'split' if split else 'composed'}
+    figures: Dict[str, object] = {'layout': 'split' if split else 'composed',
+                                  'steal_percent': steal_percent(cpu_before, cpu_times())}
     twin_log.seek(0)
     log = twin_log.read()
     twin_log.close()
@@ -269,7 +294,8 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
 def _print(figures: Dict[str, object]) -> None:
     print(f"{figures['layout']}: {figures.get('placed_parts')} parts placed, window "
           f"{figures.get('window_s')} s, micro parts in flight "
-          f"{figures.get('micro_in_flight')}")
+          f"{figures.get('micro_in_flight')}, CPU stolen by the hypervisor "
+          f"{figures.get('steal_percent')} %")
     if 'error' in figures:
         print(f"  error: {figures['error']}")
         return

@@ -4,12 +4,9 @@
 modules. Imports numpy and numba only (no ROS).
 """
 
-from conveyor_twin.micro._cache import drop_stale_caches
-drop_stale_caches()
-from conveyor_twin.micro.errors import (CapacityError, MicroError,  # noqa: E402
-                                        SpawnOverlapError)
-from conveyor_twin.micro.sim import EdgeEvents, MicroSim  # noqa: E402
-from conveyor_twin.micro.state import PartsView  # noqa: E402
+from conveyor_twin.micro.errors import CapacityError, MicroError, SpawnOverlapError
+from conveyor_twin.micro.sim import EdgeEvents, MicroSim
+from conveyor_twin.micro.state import PartsView
 
 __all__ = ['CapacityError', 'EdgeEvents', 'MicroError', 'MicroSim', 'PartsView',
            'SpawnOverlapError']
