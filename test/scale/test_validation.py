@@ -24,7 +24,7 @@ SAMPLE_STEPS = 500
 DEFLECTOR_STEPS = 20000
 # Collision-operator speed of the multi-scale run [m/s]: the Goettlich model's one free
 # parameter, chosen so the macro jam passes the deflector gap at the micro jam's mean rate
-# (see docs/cell_format.md, zones).
+# (the default cell carries the same value; see docs/cell_format.md, macro).
 DEFLECTOR_EPSILON = 0.8
 
 
@@ -166,3 +166,8 @@ def test_stopper_queue_grows_and_dissolves_as_predicted_at_both_scales() -> None
     # the tail of the feed that was still spread upstream: within 2 s at both scales
     assert micro_up[59] == 0 and multi_up[59] == pytest.approx(0.0, abs=0.5)
     assert math.isclose(micro_up[59], multi_up[59], abs_tol=0.5)
+
+
+def test_the_default_cell_carries_the_calibrated_collision_operator():
+    from conveyor_twin.cell import load_cell
+    assert load_cell().macro.epsilon == DEFLECTOR_EPSILON
