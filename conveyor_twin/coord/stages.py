@@ -59,29 +59,25 @@ class MicroStage:
         v = self.sim.parts_view()
         return v.id, v.part_type, v.x, v.y, v.yaw, v.vx, v.vy, v.wz
 
-    def _macro_barriers(self):
+    def _with_macro_barriers(self, micro_values: np.ndarray, attribute: str) -> np.ndarray:
+        """Return ``micro_values`` (one per barrier) with the entries of barriers in macro
+        zones replaced by their macro model's ``attribute`` (the array itself if there are
+        none)."""
         c = self.coupling
-        return c.barriers if c is not None and c.barriers else None
+        if c is None or not c.barriers:
+            return micro_values
+        out = micro_values.copy()
+        for b in c.barriers:
+            out[b.index] = getattr(b, attribute)
+        return out
 
     def barrier_blocked(self) -> np.ndarray:
         """Blocked flag of every light barrier at the end of the step."""
-        mb = self._macro_barriers()
-        if mb is None:
-            return self.sim.blocked
-        out = self.sim.blocked.copy()
-        for b in mb:
-            out[b.index] = b.blocked
-        return out
+        return self._with_macro_barriers(self.sim.blocked, 'blocked')
 
     def barrier_edge_count(self) -> np.ndarray:
         """Edges seen so far by every light barrier (uint32)."""
-        mb = self._macro_barriers()
-        if mb is None:
-            return self.sim.edge_count
-        out = self.sim.edge_count.copy()
-        for b in mb:
-            out[b.index] = b.edge_count
-        return out
+        return self._with_macro_barriers(self.sim.edge_count, 'edge_count')
 
     def edges(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Return the last step's edges: (barrier index, blocked, time [ns], part id).

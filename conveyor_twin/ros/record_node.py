@@ -253,6 +253,19 @@ def parse_decimation(items: Sequence[str], namespace: str) -> Dict[str, int]:
     return result
 
 
+def add_writer_arguments(group, prefix: str = '') -> None:
+    """Add the MCAP writer's options (decimation, compression, flush period, queue size) to
+    an argparse parser or group, named ``--<prefix>decimate`` etc. (``record`` uses no prefix,
+    ``run --record`` the prefix ``record-``)."""
+    group.add_argument(f'--{prefix}decimate', nargs='+', default=[], metavar='NAME=K',
+                       help='record every K-th message of a topic, e.g. parts=10 density=100')
+    group.add_argument(f'--{prefix}compression', default='lz4', choices=('lz4', 'zstd', 'none'))
+    group.add_argument(f'--{prefix}flush-period', type=float, default=0.1,
+                       help='longest wall time between chunk flushes [s] (bounds a kill loss)')
+    group.add_argument(f'--{prefix}queue-size', type=int, default=20000,
+                       help='bound of the queue to the writer thread [messages]')
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``record``."""
     p = argparse.ArgumentParser(prog='conveyor-twin record', description=__doc__,
@@ -265,15 +278,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--markers', action='store_true', help='record markers too')
     p.add_argument('--discover', action='store_true',
                    help='also record graph topics under the namespace with a known type')
-    p.add_argument('--decimate', nargs='+', default=[], metavar='NAME=K',
-                   help='record every K-th message of a topic, e.g. parts=10 density=100')
-    p.add_argument('--compression', default='lz4', choices=('lz4', 'zstd', 'none'))
+    add_writer_arguments(p)
     p.add_argument('--duration', type=float, default=0.0,
                    help='stop after this wall time [s] (0: until SIGINT/SIGTERM)')
-    p.add_argument('--flush-period', type=float, default=0.1,
-                   help='longest wall time between chunk flushes [s] (bounds a kill loss)')
-    p.add_argument('--queue-size', type=int, default=20000,
-                   help='bound of the queue to the writer thread [messages]')
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
     return p
 

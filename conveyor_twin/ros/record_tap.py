@@ -184,13 +184,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument('--record-topics', nargs='+', default=None, metavar='NAME',
                    help='record only these contract topics (default: every published one): '
                    + ', '.join(n for n, s in contract.CONTRACT_TOPICS.items() if not s.command))
-    g.add_argument('--record-decimate', nargs='+', default=[], metavar='NAME=K',
-                   help='record every K-th message of a topic, e.g. parts=10 density=100')
-    g.add_argument('--record-compression', default='lz4', choices=('lz4', 'zstd', 'none'))
-    g.add_argument('--record-flush-period', type=float, default=0.1,
-                   help='longest wall time between chunk flushes [s] (bounds a kill loss)')
-    g.add_argument('--record-queue-size', type=int, default=20000,
-                   help='bound of the queue to the writer thread [messages]')
+    from conveyor_twin.ros.record_node import add_writer_arguments
+    add_writer_arguments(g, prefix='record-')
     g.add_argument('--command', nargs='+', default=[], metavar='STEP:KIND:NAME=VALUE',
                    help='apply a command at a step, e.g. 500:belt:main=0.2 '
                    '1200:actuator:pusher=0.05 (validated like belt_command/actuator_command)')
