@@ -8,6 +8,15 @@ run, lets ``--settle`` seconds pass, then measures for ``--duration`` seconds:
 
 - per stream: messages, rate [Hz], inter-arrival p50/p99/max [ms], lost messages (gaps in the
   sim-time stamps, which advance one step per message);
+- the subscriber's own CPU time per second of the window.
+
+Readers (``--reader``): ``poll`` (default) takes every queued message of every stream every
+``POLL_PERIOD`` in one pass and times it by its DDS reception time (``received_timestamp``,
+stamped by the middleware's receive thread when the sample arrives), so the measuring process
+costs little CPU on a 2-core machine and its own Python scheduling does not enter the
+inter-arrival figures; ``callback`` runs one rclpy callback per message (EventsExecutor) and
+times it on arrival in Python, as a controller written with callbacks would see the streams.
+Both readers keep 1000 samples per stream, so "lost" counts what the twin did not deliver.
 - overruns and step times from the twin's ``diagnostics`` (1 Hz) during the window, and the
   twin's closing summary.
 
@@ -35,6 +44,8 @@ STREAMS = ('parts', 'light_barriers', 'belt_states', 'actuator_states', '/clock'
 CONNECT_TIMEOUT = 60.0    # s for the twin to appear
 RESULT_PREFIX = 'bench twin subscriber: '
 STEP_NS = 1_000_000
+POLL_PERIOD = 0.002   # s between two passes of the polling reader
+READER_DEPTH = 1000    # samples each reader keeps
 
 
 def lattice(n: int, *, x0: float = 0.3, y_half: float = 0.2, pitch_y: float = 0.04,
@@ -83,6 +94,7 @@ def subscriber_main(argv: List[str]) -> int:
     p.add_argument('--duration', type=float, default=DEFAULT_DURATION)
     p.add_argument('--settle', type=float, default=DEFAULT_SETTLE)
     p.add_argument('--belt-speed', type=float, default=DEFAULT_BELT_SPEED)
+    p.add_argument('--reader', choices=('poll', 'callback'), default='poll')
     args = p.parse_args(argv)
 
     import rclpy
@@ -118,12 +130,34 @@ def subscriber_main(argv: List[str]) -> int:
                           + int.from_bytes(data[8:12], 'little'))
 
     # /clock is offered best-effort, keep-last 1 (the simulator convention); a clock consumer
-    # subscribes with depth 1 and wants only the newest. Here the reader keeps 1000 so that
+    # subscribes with depth 1 and wants only the newest. Here every reader keeps 1000 so that
     # "lost" counts what the twin did not deliver, not what this reader overwrote.
-    clock_qos = QoSProfile(depth=1000, reliability=CLOCK_QOS.reliability)
-    subs = [node.create_subscription(types[t], t, lambda d, log=arrivals[t]: on_raw(d, log),
-                                     clock_qos if t == '/clock' else STREAM_QOS, raw=True)
+    def reader_qos(topic: str) -> QoSProfile:
+        offered = CLOCK_QOS if topic == '/clock' else STREAM_QOS
+        return QoSProfile(depth=READER_DEPTH, reliability=offered.reliability,
+                          durability=offered.durability)
+
+    # the polling reader's subscriptions belong to a node no executor serves: only take() reads
+    readers = Node('bench_twin_reader', context=context) if args.reader == 'poll' else node
+    subs = [readers.create_subscription(types[t], t,
+                                        lambda d, log=arrivals[t]: on_raw(d, log),
+                                        reader_qos(t), raw=True)
             for t in STREAMS]
+    polled = list(zip(subs, (arrivals[t] for t in STREAMS))) if args.reader == 'poll' else []
+
+    def take_all() -> None:
+        """Take every queued sample of every stream; time it by its DDS reception."""
+        for sub, log in polled:
+            handle, msg_type = sub.handle, sub.msg_type
+            while True:
+                taken = handle.take_message(msg_type, True)
+                if taken is None:
+                    break
+                if recording[0]:
+                    data, info = taken
+                    log[0].append(info['received_timestamp'])
+                    log[1].append(int.from_bytes(data[4:8], 'little') * 1_000_000_000
+                                  + int.from_bytes(data[8:12], 'little'))
     subs.append(node.create_subscription(
         DiagnosticArray, 'diagnostics',
         lambda m: diagnostics.append({kv.key: kv.value for kv in m.status[0].values}),
@@ -136,7 +170,8 @@ def subscriber_main(argv: List[str]) -> int:
         while time.monotonic() < end:
             if until():
                 return True
-            executor.spin_once(timeout_sec=0.05)
+            executor.spin_once(timeout_sec=POLL_PERIOD if polled else 0.05)
+            take_all()
         return until()
 
     ok = spin_for(CONNECT_TIMEOUT, lambda: spawn.service_is_ready()
@@ -173,17 +208,24 @@ def subscriber_main(argv: List[str]) -> int:
             keep[indices] = False
     freeze_heap()  # no full collections of this process's heap during the window
     spin_for(args.settle)
+    take_all()  # what queued before the window is not measured
     diagnostics.clear()
     recording[0] = True
     t0 = time.monotonic()
+    cpu0 = time.process_time()
     spin_for(args.duration)
+    take_all()
     recording[0] = False
     window = time.monotonic() - t0
+    cpu = time.process_time() - cpu0
     streams = {t: _stats(a[0], a[1], window) for t, a in arrivals.items()}
     result = {'placed_parts': placed, 'window_s': round(window, 3), 'streams': streams,
+              'reader': args.reader, 'subscriber_cpu_share': round(cpu / window, 3),
               'diagnostics': diagnostics}
     print(RESULT_PREFIX + json.dumps(result), flush=True)
     executor.shutdown(timeout_sec=2.0)
+    if readers is not node:
+        readers.destroy_node()
     node.destroy_node()
     context.try_shutdown()
     return 0
@@ -252,7 +294,8 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
     sub = subprocess.Popen(
         [sys.executable, '-m', 'conveyor_twin.bench.twin', '--subscriber', '--parts',
          str(args.parts), '--duration', str(args.duration), '--settle', str(args.settle),
-         '--belt-speed', str(args.belt_speed)], env=env, stdout=subprocess.PIPE, text=True)
+         '--belt-speed', str(args.belt_speed), '--reader', args.reader], env=env,
+        stdout=subprocess.PIPE, text=True)
     result: Optional[dict] = None
     try:
         for line in sub.stdout:
@@ -295,7 +338,8 @@ def _print(figures: Dict[str, object]) -> None:
     print(f"{figures['layout']}: {figures.get('placed_parts')} parts placed, window "
           f"{figures.get('window_s')} s, micro parts in flight "
           f"{figures.get('micro_in_flight')}, CPU stolen by the hypervisor "
-          f"{figures.get('steal_percent')} %")
+          f"{figures.get('steal_percent')} %; {figures.get('reader')} reader using "
+          f"{figures.get('subscriber_cpu_share')} of a core")
     if 'error' in figures:
         print(f"  error: {figures['error']}")
         return
@@ -329,6 +373,9 @@ def main(argv: List[str]) -> int:
                    help='wait after placing the parts [s]')
     p.add_argument('--belt-speed', type=float, default=DEFAULT_BELT_SPEED, help='[m/s]')
     p.add_argument('--layout', choices=('composed', 'split', 'both'), default='composed')
+    p.add_argument('--reader', choices=('poll', 'callback'), default='poll',
+                   help='poll: take all queued samples every 2 ms, timed by DDS reception; '
+                        'callback: one rclpy callback per message, timed in Python')
     p.add_argument('--json', action='store_true', help='print one JSON object')
     args = p.parse_args(argv)
     layouts = {'composed': [False], 'split': [True], 'both': [False, True]}[args.layout]

@@ -1,0 +1,36 @@
+"""``conveyor-twin bench twin`` end to end, short: both readers measure every stream.
+
+The figures themselves (rates, overruns) depend on the machine and are not asserted; what is
+pinned is that the benchmark places its parts, measures all five streams in sim-time order with
+either reader, and reports the reader's own CPU share.
+"""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from conveyor_twin.bench.twin import STREAMS
+from test.ros_env import ros_subprocess_env
+
+
+@pytest.mark.parametrize('reader', ['poll', 'callback'])
+def test_bench_twin_measures_every_stream(reader):
+    argv = [sys.executable, '-m', 'conveyor_twin.cli', 'bench', 'twin', '--duration', '2',
+            '--settle', '0.5', '--parts', '100', '--reader', reader, '--json']
+    done = subprocess.run(argv, env=ros_subprocess_env(), capture_output=True, text=True,
+                          timeout=240)
+    assert done.returncode == 0, done.stderr[-2000:]
+    report = json.loads(done.stdout.strip().splitlines()[-1])
+    (figures,) = report['layouts']
+    assert 'error' not in figures, figures
+    assert figures['placed_parts'] == 100
+    assert figures['reader'] == reader and 0.0 < figures['subscriber_cpu_share'] < 2.0
+    assert set(figures['streams']) == set(STREAMS)
+    for topic, stream in figures['streams'].items():
+        # a realtime twin sends ~2000 per stream in 2 s; 100 leaves room for a loaded machine
+        assert stream['messages'] >= 100, (topic, stream)
+        assert stream['out_of_order'] == 0, (topic, stream)
+        assert stream['interarrival_p50_ms'] > 0.0, (topic, stream)
+    assert figures['twin_summary']['steps'] > 0
