@@ -285,7 +285,8 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     cell = quiet_cell_file(directory)
     twin_cmd = [sys.executable, '-m', 'conveyor_twin.cli', 'run', '--cell', cell,
-                '--mode', 'realtime', '--duration', '0', '--json', '--quiet']
+                '--mode', 'realtime', '--duration', '0', '--json', '--quiet',
+                '--markers-rate', str(args.markers_rate)]
     if split:
         twin_cmd.append('--split')
     twin_log = open(os.path.join(directory, 'twin.log'), 'w+')
@@ -376,6 +377,8 @@ def main(argv: List[str]) -> int:
     p.add_argument('--reader', choices=('poll', 'callback'), default='poll',
                    help='poll: take all queued samples every 2 ms, timed by DDS reception; '
                         'callback: one rclpy callback per message, timed in Python')
+    p.add_argument('--markers-rate', type=float, default=30.0,
+                   help="the twin's MarkerArray rate [Hz] (0: none)")
     p.add_argument('--json', action='store_true', help='print one JSON object')
     args = p.parse_args(argv)
     layouts = {'composed': [False], 'split': [True], 'both': [False, True]}[args.layout]
