@@ -9,6 +9,9 @@ Scale hand-over: the micro scale simulates the whole cell; a
 :class:`~conveyor_twin.coord.scale.ScaleCoupling` stepped after both stages (the :class:`Twin`
 adds it when it steps both locally) moves parts and mass between them, and light barriers in
 ``macro`` zones take their edges from the density (:mod:`conveyor_twin.coord.macro_barriers`).
+Split over processes, the coupling runs in the macro process on a mirror of the micro state, and
+the micro stage's ``coupling`` is a :class:`~conveyor_twin.coord.mirror.RemoteCoupling` carrying
+the same barrier values and edges (:mod:`conveyor_twin.coord.mirror`).
 """
 
 from typing import Dict, List, Tuple

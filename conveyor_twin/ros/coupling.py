@@ -3,8 +3,13 @@
 Payloads travel as ``std_msgs/UInt8MultiArray`` CDR built and parsed by hand (no per-step
 message objects). Topic names start with ``_`` so ``ros2 topic list`` hides them.
 
-Payload kinds (first byte): ``S`` step input, ``R`` reset (seed + cell YAML), ``P`` spawn
+Payload kinds (first byte): ``S`` step input, ``R`` reset (seed + cell file), ``P`` spawn
 request, ``D`` done (node role, step, reply bytes).
+
+Cells with ``macro``/``auto`` zones also couple the two scale nodes every step
+(:mod:`conveyor_twin.coord.mirror`): the micro node sends its state after its step on
+:data:`MICRO_STATE_TOPIC`, the macro node answers with the hand-over's edits on
+:data:`EDITS_TOPIC`; both payloads are :func:`stamped` with the step.
 """
 
 import struct
@@ -12,6 +17,8 @@ from typing import Tuple
 
 COUPLING_TOPIC = '_coupling/to_scales'
 DONE_TOPIC = '_coupling/from_scales'
+MICRO_STATE_TOPIC = '_coupling/micro_state'
+EDITS_TOPIC = '_coupling/edits'
 
 STEP = b'S'
 RESET = b'R'
@@ -21,6 +28,7 @@ DONE = b'D'
 _PREFIX = struct.Struct('<4sIII')  # encapsulation, layout.dim length, data_offset, data length
 _ENCAPSULATION = b'\x00\x01\x00\x00'
 _DONE = struct.Struct('<cBQ')  # kind, role, step
+_STEP = struct.Struct('<Q')
 
 
 def to_cdr(payload: bytes) -> bytes:
@@ -48,3 +56,13 @@ def parse_done(payload: bytes) -> Tuple[int, int, bytes]:
     """Return (role, step, reply) of a :func:`done` payload."""
     _, role, step = _DONE.unpack_from(payload, 0)
     return role, step, payload[_DONE.size:]
+
+
+def stamped(step: int, payload: bytes) -> bytes:
+    """Return ``payload`` prefixed with ``step`` (the scale nodes' exchange)."""
+    return _STEP.pack(step) + payload
+
+
+def parse_stamped(payload: bytes) -> Tuple[int, bytes]:
+    """Return (step, payload view) of :func:`stamped` bytes (no copy)."""
+    return _STEP.unpack_from(payload, 0)[0], memoryview(payload)[_STEP.size:]

@@ -1,13 +1,21 @@
-"""``macro_simulator``: publishes the density grid of every macro zone each step."""
+"""``macro_simulator``: publishes the density grid of every macro zone each step.
+
+As its own process (split layout) with a cell whose zones are ``macro``/``auto``, it also runs
+the scale hand-over each step on a mirror of the micro state the micro node sends, and sends the
+edits back (:mod:`conveyor_twin.coord.mirror`); its counters then carry the cell's ledger.
+"""
 
 import sys
-from typing import List, Optional
+from typing import Dict, List, Optional
 
 from conveyor_twin_msgs.msg import DensityGrid
+from std_msgs.msg import UInt8MultiArray
 
+from conveyor_twin.coord.mirror import has_coupling, MacroSide
 from conveyor_twin.coord.stages import MacroStage
 from conveyor_twin.coord.step_input import StepInput
-from conveyor_twin.ros.qos import raw_publish, STREAM_QOS
+from conveyor_twin.ros import coupling
+from conveyor_twin.ros.qos import COUPLING_QOS, raw_publish, STREAM_QOS
 from conveyor_twin.ros.scale_node import MACRO_ROLE, ScaleNode
 from conveyor_twin.wire import cdr
 
@@ -23,6 +31,61 @@ class MacroNode(ScaleNode):
                           for g in stage.grids]
         self.density_pub = self.create_publisher(DensityGrid, 'density', STREAM_QOS)
         self._pub_density = raw_publish(self.density_pub, self.get_logger())
+        self._side: Optional[MacroSide] = None  # the hand-over on a micro mirror (split)
+        self._pending: Optional[StepInput] = None  # stepped, waiting for the micro state
+        self._states: Dict[int, memoryview] = {}  # micro states by step, arrived early
+        if self.remote and has_coupling(stage.cell):
+            # the mirror never runs sources: its seed does not matter
+            self._side = MacroSide(stage, stage.cell, 0)
+            self.edits_pub = self.create_publisher(UInt8MultiArray, coupling.EDITS_TOPIC,
+                                                   COUPLING_QOS)
+            self._pub_edits = raw_publish(self.edits_pub, self.get_logger())
+            self._state_sub = self.create_subscription(
+                UInt8MultiArray, coupling.MICRO_STATE_TOPIC, self._on_micro_state,
+                COUPLING_QOS, raw=True)
+        self.serve_coordinator()
+
+    def peers_matched(self) -> bool:
+        """Return True once the micro node's exchange is matched both ways (if coupled)."""
+        return self._side is None or (self.edits_pub.get_subscription_count() >= 1
+                                      and self._state_sub.get_publisher_count() >= 1)
+
+    def advance_remote(self, inp: StepInput) -> None:
+        """Step the grids; with a coupled cell hand over once the micro state has arrived."""
+        self.stage.advance(inp)
+        if self._side is None:
+            self.finish_step(inp)
+            return
+        self._pending = inp
+        self._couple()
+
+    def _on_micro_state(self, data: bytes) -> None:
+        step, body = coupling.parse_stamped(coupling.from_cdr(data))
+        self._states[step] = body
+        self._couple()
+
+    def _couple(self) -> None:
+        """Run the hand-over of the pending step if its micro state is here; finish it."""
+        inp = self._pending
+        if inp is None or inp.step not in self._states:
+            return
+        state = self._states.pop(inp.step)
+        if self._states:
+            stale = sorted(self._states)
+            self.get_logger().error(f'micro states of steps {stale} unused; dropped')
+            self._states.clear()
+        self._pending = None
+        reply = self._side.couple(inp, state)
+        self._pub_edits(coupling.to_cdr(coupling.stamped(inp.step, reply)))
+        self.finish_step(inp)
+
+    def reset_stage(self, cell, seed: int) -> None:
+        """Restart the grids and rebind the hand-over."""
+        self.stage.reset(cell, seed)
+        self._pending = None
+        self._states.clear()
+        if self._side is not None:
+            self._side.reset(cell, 0)
 
     def publish_step(self, inp: StepInput) -> None:
         """Publish every macro zone's density for the step just taken."""

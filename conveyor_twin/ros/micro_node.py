@@ -2,7 +2,9 @@
 
 Composed, its stage is stepped by the coordinator in the same process; as its own process
 (``ros2 run conveyor_twin micro_simulator`` or ``python -m conveyor_twin.ros.micro_node``) it
-follows the coordinator's step inputs over the coupling topic.
+follows the coordinator's step inputs over the coupling topic. For a cell with ``macro``/``auto``
+zones it then sends its state after each step to the macro node, which runs the hand-over, and
+replays the returned edits before it publishes (:mod:`conveyor_twin.coord.mirror`).
 """
 
 import sys
@@ -11,13 +13,16 @@ from typing import List, Optional
 
 from conveyor_twin_msgs.msg import LightBarrierEdge, LightBarrierStates, PartStates
 import numpy as np
+from std_msgs.msg import UInt8MultiArray
 from visualization_msgs.msg import MarkerArray
 
+from conveyor_twin.coord.mirror import has_coupling, MicroSide
 from conveyor_twin.coord.runner import raise_thread_priority
 from conveyor_twin.coord.stages import MicroStage
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.ros.markers import CellMarkers
-from conveyor_twin.ros.qos import EDGE_QOS, raw_publish, SLOW_QOS, STREAM_QOS
+from conveyor_twin.ros import coupling
+from conveyor_twin.ros.qos import COUPLING_QOS, EDGE_QOS, raw_publish, SLOW_QOS, STREAM_QOS
 from conveyor_twin.ros.scale_node import MICRO_ROLE, ScaleNode
 from conveyor_twin.wire import cdr
 
@@ -53,6 +58,50 @@ class MicroNode(ScaleNode):
             self._markers_thread = threading.Thread(target=self._markers_loop,
                                                     name='conveyor_twin_markers', daemon=True)
             self._markers_thread.start()
+        self._side = None  # the scale hand-over's micro half (split layout, coupled cells)
+        self._pending: Optional[StepInput] = None  # stepped, waiting for the edits
+        if self.remote and has_coupling(cell):
+            self._side = MicroSide(stage)
+            self.state_pub = self.create_publisher(UInt8MultiArray, coupling.MICRO_STATE_TOPIC,
+                                                   COUPLING_QOS)
+            self._pub_state = raw_publish(self.state_pub, self.get_logger())
+            self._edits_sub = self.create_subscription(
+                UInt8MultiArray, coupling.EDITS_TOPIC, self._on_edits, COUPLING_QOS, raw=True)
+        self.serve_coordinator()
+
+    def peers_matched(self) -> bool:
+        """Return True once the macro node's exchange is matched both ways (if coupled)."""
+        return self._side is None or (self.state_pub.get_subscription_count() >= 1
+                                      and self._edits_sub.get_publisher_count() >= 1)
+
+    def advance_remote(self, inp: StepInput) -> None:
+        """Step; with a coupled cell send the state to the macro node and wait for its edits."""
+        self.stage.advance(inp)
+        if self._side is None:
+            self.finish_step(inp)
+            return
+        self._pending = inp
+        self._pub_state(coupling.to_cdr(coupling.stamped(inp.step, self._side.state_bytes())))
+
+    def _on_edits(self, data: bytes) -> None:
+        """Replay the macro node's hand-over edits of the pending step, then finish it."""
+        step, body = coupling.parse_stamped(coupling.from_cdr(data))
+        inp = self._pending
+        if inp is None or step != inp.step:
+            pending = None if inp is None else inp.step
+            self.get_logger().error(f'hand-over edits of step {step} while step {pending} '
+                                    'is pending; ignored')
+            return
+        self._pending = None
+        self._side.apply(body)
+        self.finish_step(inp)
+
+    def reset_stage(self, cell, seed: int) -> None:
+        """Restart the stage; re-attach the hand-over's micro half."""
+        self.stage.reset(cell, seed)
+        self._pending = None
+        if self._side is not None:
+            self._side.reset()
 
     def publish_step(self, inp: StepInput) -> None:
         """Publish the parts, barrier states and any barrier edges of the step just taken."""

@@ -14,6 +14,7 @@ from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures
 
 MICRO_ROLE = 1
 MACRO_ROLE = 2
+CONNECT_PERIOD = 0.01  # s between checks that the scale exchange is matched (split layout)
 
 
 def encode_counters(counters: Dict[str, float]) -> bytes:
@@ -33,7 +34,10 @@ class ScaleNode(Node):
 
     Composed, the coordinator's step listener calls :meth:`publish_step`; split
     (``remote=True``), the node subscribes to the coupling topic, advances its own stage with
-    each step input, publishes, and reports the step done.
+    each step input (:meth:`advance_remote`), publishes, and reports the step done
+    (:meth:`finish_step`). Nodes that hand parts over to the other scale first exchange bytes
+    with it and finish the step later (a state machine: no callback waits for another); they
+    serve the coordinator only once that exchange is matched (:meth:`peers_matched`).
 
     :param stage: the scale's core wrapper (``advance``, ``reset``).
     :param role: :data:`MICRO_ROLE` or :data:`MACRO_ROLE`.
@@ -51,11 +55,37 @@ class ScaleNode(Node):
         self.parameters = declare_twin_parameters(self, step_s=step_s)
         self.markers_every = (max(1, round(1.0 / (markers_rate * step_s)))
                               if markers_rate > 0 else 0)
+        self.remote = remote
         if remote:
             self._done_pub = self.create_publisher(UInt8MultiArray, coupling.DONE_TOPIC,
                                                    COUPLING_QOS)
-            self.create_subscription(UInt8MultiArray, coupling.COUPLING_TOPIC,
-                                     self._on_coupling, COUPLING_QOS, raw=True)
+        self._connect_timer = None
+
+    def serve_coordinator(self) -> None:
+        """Split layout: subscribe to the coordinator's payloads, at once if this node has no
+        exchange with the other scale node, else once it is matched (the coordinator waits for
+        that subscription before its first step). Subclasses call it at the end of their
+        constructor."""
+        if not self.remote:
+            return
+        if self.peers_matched():
+            self._subscribe_coordinator()
+        else:
+            self._connect_timer = self.create_timer(CONNECT_PERIOD, self._connect)
+
+    def peers_matched(self) -> bool:
+        """Return True once the exchange with the other scale node (if any) is matched."""
+        return True
+
+    def _connect(self) -> None:
+        if self._connect_timer.is_canceled() or not self.peers_matched():
+            return
+        self._connect_timer.cancel()  # (destroying a timer inside its own callback is unsafe)
+        self._subscribe_coordinator()
+
+    def _subscribe_coordinator(self) -> None:
+        self.create_subscription(UInt8MultiArray, coupling.COUPLING_TOPIC,
+                                 self._on_coupling, COUPLING_QOS, raw=True)
 
     def publish_step(self, inp: StepInput) -> None:
         """Publish this scale's streams for the step just taken."""
@@ -65,30 +95,40 @@ class ScaleNode(Node):
         """Place parts for a split-layout spawn request; return the reply bytes."""
         return b''
 
+    def advance_remote(self, inp: StepInput) -> None:
+        """Advance the stage with the coordinator's step input, then :meth:`finish_step`
+        (nodes coupled to the other scale finish when its bytes have arrived)."""
+        self.stage.advance(inp)
+        self.finish_step(inp)
+
+    def finish_step(self, inp: StepInput) -> None:
+        """Publish the step's streams and report the step done with the stage's counters."""
+        self.publish_step(inp)
+        self._report(inp.step, encode_counters(dict(self.stage.counters(),
+                                                    publish_failures=publish_failures(self))))
+
+    def reset_stage(self, cell, seed: int) -> None:
+        """Restart the stage (split layout reset)."""
+        self.stage.reset(cell, seed)
+
+    def _report(self, step: int, reply: bytes = b'') -> None:
+        self._last_step = step
+        self._done_pub.publish(coupling.to_cdr(coupling.done(self.role, step, reply)))
+
     def _on_coupling(self, data: bytes) -> None:
         payload = coupling.from_cdr(data)
         kind, body = payload[:1], payload[1:]
-        reply = b''
         if kind == coupling.STEP:
-            inp = StepInput.unpack(body)
-            self.stage.advance(inp)
-            self.publish_step(inp)
-            step = inp.step
-            reply = encode_counters(dict(self.stage.counters(),
-                                         publish_failures=publish_failures(self)))
+            self.advance_remote(StepInput.unpack(body))
         elif kind == coupling.RESET:
             seed = int.from_bytes(body[:8], 'little')
             cell_file = body[8:].decode()
             cell = load_cell(cell_file) if cell_file else self.stage.cell
-            self.stage.reset(cell, seed)
-            step = 0
+            self.reset_stage(cell, seed)
+            self._report(0)
         elif kind == coupling.SPAWN:
-            reply = self.spawn_reply(body)
-            step = self._last_step
+            self._report(self._last_step, self.spawn_reply(body))
         else:
             self.get_logger().error(f'unknown coupling payload {kind!r}; ignored')
-            return
-        self._last_step = step
-        self._done_pub.publish(coupling.to_cdr(coupling.done(self.role, step, reply)))
 
     _last_step = 0

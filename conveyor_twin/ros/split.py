@@ -3,6 +3,9 @@
 ``scale_coordinator`` (this module's :func:`coordinator_main`) drives time; every step it sends
 the step input over the coupling topic and waits for both scale nodes to report the step done.
 ``conveyor-twin run --split`` starts the three processes and prints the coordinator's summary.
+With ``macro``/``auto`` zones the micro and macro nodes also exchange the scale hand-over every
+step (micro state to the macro node, edits back; :mod:`conveyor_twin.coord.mirror`), so the
+streams are bit-identical to the composed layout's.
 """
 
 import argparse
@@ -28,26 +31,6 @@ SCALE_CONNECT_TIMEOUT = 30.0  # s for the scale processes to appear and match
 SUMMARY_PREFIX = 'conveyor_twin summary: '
 
 
-def uncoupled_zones(cell) -> List[str]:
-    """Return the ``macro``/``auto`` zones of ``cell`` (as ``name (policy)``).
-
-    The split layout steps the micro and macro scales in separate processes but does not yet
-    hand parts over between them (the hand-over needs both scales' state in one step, see
-    :mod:`conveyor_twin.coord.scale`): such a cell is refused rather than run with its grids
-    evolving alone.
-    """
-    return [f'{z.name!r} ({z.policy})' for z in cell.zones if z.policy in ('macro', 'auto')]
-
-
-def refusal(cell) -> Optional[str]:
-    """Return why the split layout cannot run ``cell``, or None if it can."""
-    zones = uncoupled_zones(cell)
-    if not zones:
-        return None
-    return ('the split layout does not couple the micro and macro scales yet; this cell has '
-            'the zones ' + ', '.join(zones) + ': run it composed (without --split)')
-
-
 def _remote_counters(node: CoordinatorNode) -> Dict[str, float]:
     replies = node.last_replies()
     return {**decode_counters('micro', replies.get(MICRO_ROLE, b'')),
@@ -60,11 +43,6 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
     if started is None:
         return 1
     context, params, cell, seed = started
-    why = refusal(cell)
-    if why is not None:
-        print(f'scale_coordinator: {why}', file=sys.stderr)
-        context.try_shutdown()
-        return 2
     max_steps = round(params.duration / cell.settings.step) if params.duration > 0 else None
     twin = Twin(cell, seed=seed)
     runner = Runner(twin, params.mode, max_steps=max_steps)
@@ -134,10 +112,6 @@ def run_split(args: argparse.Namespace) -> int:
     except CellError as exc:
         print(f'invalid cell: {exc}', file=sys.stderr)
         return 1
-    why = refusal(cell)
-    if why is not None:
-        print(f'conveyor-twin run: {why}', file=sys.stderr)
-        return 2
     ros_args = _ros_args(cell_file, args.seed, args.mode, args.duration, args.namespace,
                          args.markers_rate)
     env = dict(os.environ)

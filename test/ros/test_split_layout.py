@@ -39,9 +39,9 @@ def _density_per_step(cell) -> int:
     return len(MacroStage(cell).grids)
 
 
-def start_split(ros_processes, tmp_path, tag: str):
+def start_split(ros_processes, tmp_path, tag: str, cell_file: str = ''):
     """Start micro, macro and coordinator processes in lockstep; return them."""
-    args = _ros_args('', SEED, 'lockstep', 0.0, None, 0.0)
+    args = _ros_args(cell_file, SEED, 'lockstep', 0.0, None, 0.0)
     procs = []
     for module in ('conveyor_twin.ros.micro_node', 'conveyor_twin.ros.macro_node',
                    'conveyor_twin.ros.split'):
@@ -56,8 +56,8 @@ def _logs(tmp_path) -> str:
     return '\n'.join(f'--- {p.name}\n{p.read_text()[-2000:]}' for p in tmp_path.glob('*.log'))
 
 
-def run_composed(context, name: str):
-    cell = load_cell()
+def run_composed(context, name: str, cell_file: str = ''):
+    cell = load_cell(cell_file or None)
     twin = ComposedTwin(cell, seed=SEED, mode=TimeMode.LOCKSTEP, context=context,
                         markers_rate=0.0)
     twin.start()
@@ -65,15 +65,18 @@ def run_composed(context, name: str):
     try:
         assert driver.wait_connected(), 'composed twin not discovered'
         driver.run(SEQUENCE)
+        driver.twin_counters = twin.counters()
         return driver.digests(), driver.counts(), driver
     finally:
         driver.close()
         twin.stop()
 
 
-def run_split(context, ros_processes, tmp_path, tag: str, check_parameters: bool = False):
-    start_split(ros_processes, tmp_path, tag)
-    driver = Driver(context, density_per_step=_density_per_step(load_cell()), name='probe_' + tag)
+def run_split(context, ros_processes, tmp_path, tag: str, check_parameters: bool = False,
+              cell_file: str = ''):
+    start_split(ros_processes, tmp_path, tag, cell_file)
+    driver = Driver(context, density_per_step=_density_per_step(load_cell(cell_file or None)),
+                    name='probe_' + tag)
     try:
         assert driver.wait_connected(), 'split twin not discovered\n' + _logs(tmp_path)
         driver.run(SEQUENCE)
@@ -121,26 +124,66 @@ def test_split_streams_are_consecutive_and_identical_to_composed_and_reruns(
     assert split_rerun == composed
 
 
-def test_split_refuses_a_cell_with_macro_zones_rather_than_run_it_uncoupled(tmp_path):
-    import subprocess
-
+def _coupled_cell_file(tmp_path) -> str:
+    """Write the default cell with an ``auto`` zone at the feeder (600 parts/s, belt at 1.5 m/s:
+    its tiles turn macro and release parts within the sequence) and a ``macro`` zone downstream
+    holding an extra light barrier (its edges come from the density)."""
     import yaml
 
     from conveyor_twin.cell import default_cell_text
-    from conveyor_twin.ros.split import refusal
-    from test.ros_env import ros_subprocess_env
-    assert refusal(load_cell()) is None
     doc = yaml.safe_load(default_cell_text())
-    doc['zones'][0]['policy'] = 'auto'
-    path = tmp_path / 'auto_cell.yaml'
+    doc['sources'][0]['rate'] = 600.0
+    doc['belts'][0]['speed'] = 1.5
+    doc['light_barriers'].append({'name': 'lb_feed', 'start': [0.9, -0.25],
+                                  'end': [0.9, 0.25], 'height': 0.005})
+    doc['zones'] = [
+        {'name': 'feed', 'policy': 'auto', 'region': [0.0, -0.25, 0.5, 0.25],
+         'resolution': 0.02,
+         'auto': {'tile': 0.25, 'to_macro_density': 800.0, 'to_micro_density': 320.0,
+                  'min_dwell': 0.05, 'sensor_margin': 0.05}},
+        {'name': 'mid', 'policy': 'macro', 'region': [0.55, -0.25, 1.2, 0.25],
+         'resolution': 0.02}]
+    path = tmp_path / 'coupled_cell.yaml'
     path.write_text(yaml.safe_dump(doc))
-    cell = load_cell(str(path))
-    assert "'belt' (auto)" in refusal(cell)
-    for argv in (['-m', 'conveyor_twin.cli', 'run', '--split', '--cell', str(path),
-                  '--duration', '0.01'],
-                 ['-m', 'conveyor_twin.ros.split', '--ros-args', '-p', f'cell_file:={path}']):
-        done = subprocess.run([sys.executable] + argv, env=ros_subprocess_env(),
-                              capture_output=True, text=True, timeout=120)
-        assert done.returncode == 2, done.stderr
-        assert 'does not couple the micro and macro scales' in done.stderr
-        assert "'belt' (auto)" in done.stderr and 'without --split' in done.stderr
+    return str(path)
+
+
+def test_split_hand_over_between_scales_is_identical_to_composed(
+        ros_context, ros_processes, tmp_path):
+    # The hand-over runs in the macro process on a mirror of the micro state (coord.mirror);
+    # the edits go back to the micro process: every stream, the density and the ledger in the
+    # summary counters must match the composed layout's bit for bit.
+    from conveyor_twin.coord.mirror import has_coupling
+    cell_file = _coupled_cell_file(tmp_path)
+    assert has_coupling(load_cell(cell_file))
+    composed, composed_counts, composed_driver = run_composed(ros_context, 'probe_cc',
+                                                              cell_file)
+    _assert_consecutive(composed_driver)
+    assert composed_counts['density'] == 2 * STEPS
+    last = cdr.decode_light_barrier_states(composed_driver.probe.received['light_barriers'][-1])
+    assert last[5][3] >= 4 and last[5][0] >= 2, 'the hash should cover macro and micro edges'
+    assert len(cdr.decode_part_states(composed_driver.probe.received['parts'][-1]).id) >= 10
+    split, split_counts, split_driver = run_split(ros_context, ros_processes, tmp_path, 'sc',
+                                                  cell_file=cell_file)
+    _assert_consecutive(split_driver)
+    split_counts.pop('/clock')
+    composed_counts.pop('/clock')
+    assert split_counts == composed_counts, _logs(tmp_path)
+    assert split == composed, _logs(tmp_path)
+    # the ledger comes from the macro process's counters (printed in the summary at exit)
+    summary = _summary(tmp_path / 'sc_split.log')
+    counters = composed_driver.twin_counters
+    assert counters['macro_balance_captured'] > 50 and counters['macro_balance_released'] > 5
+    assert abs(counters['macro_balance_residual']) <= 1e-9
+    for key, value in counters.items():
+        if not key.endswith('publish_failures'):
+            assert summary[key] == value, key
+
+
+def _summary(log) -> dict:
+    import json
+
+    from conveyor_twin.ros.split import SUMMARY_PREFIX
+    lines = [ln for ln in log.read_text().splitlines() if ln.startswith(SUMMARY_PREFIX)]
+    assert lines, log.read_text()[-2000:]
+    return json.loads(lines[-1][len(SUMMARY_PREFIX):])
