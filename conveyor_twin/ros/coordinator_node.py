@@ -34,6 +34,7 @@ from conveyor_twin.ros.qos import (CLOCK_QOS, COMMAND_QOS, COUPLING_QOS, publish
 from conveyor_twin.wire import cdr
 
 REMOTE_STEP_TIMEOUT = 10.0        # s a split scale node may take to report a step done
+COUNTERS_TIMEOUT = 2.0            # s the split scale nodes may take to send their counters
 LOG_THROTTLE = 1.0                # s between two logged rejections
 
 
@@ -86,7 +87,8 @@ class CoordinatorNode(Node):
         self.call_listeners: List[Callable[[str, int, Any], None]] = []
         self._done: Dict[int, int] = {role: 0 for role in self._remote_roles}  # replies seen
         self._replies: Dict[int, tuple] = {}  # role -> (step, reply bytes) of the last reply
-        self._step_replies: Dict[int, bytes] = {}
+        self._step_replies: Dict[int, bytes] = {}  # role -> counters (reply bytes)
+        self._replies_fresh = False  # _step_replies hold counters of the current state
         self._done_cv = threading.Condition()
         self._scales_ready = not self._remote_roles
         self.coupling_node: Optional[Node] = None
@@ -154,21 +156,22 @@ class CoordinatorNode(Node):
                 self._replies[role] = (step, reply)
                 self._done_cv.notify_all()
 
-    def _send_and_wait(self, payload: bytes, step: int) -> Dict[int, bytes]:
-        """Send a coupling payload and wait for every scale node's reply to it."""
+    def _send_and_wait(self, payload: bytes, step: int,
+                       timeout: float = REMOTE_STEP_TIMEOUT) -> Dict[int, bytes]:
+        """Send a coupling payload and wait for every scale node's reply to it [s]."""
         if not self._scales_ready and not self.wait_for_scales(REMOTE_STEP_TIMEOUT):
             raise TimeoutError('micro_simulator and macro_simulator are not connected')
         with self._done_cv:
             counts = dict(self._done)
         self.coupling_pub.publish(coupling.to_cdr(payload))
-        deadline = time.monotonic() + REMOTE_STEP_TIMEOUT
+        deadline = time.monotonic() + timeout
         with self._done_cv:
             while any(self._done[r] <= counts[r] for r in counts):
                 remaining = deadline - time.monotonic()
                 if remaining <= 0 or not self.context.ok():
                     missing = [r for r in counts if self._done[r] <= counts[r]]
                     raise TimeoutError(f'scale nodes {missing} did not answer for step {step} '
-                                       f'within {REMOTE_STEP_TIMEOUT:g} s')
+                                       f'within {timeout:g} s')
                 self._done_cv.wait(remaining)
             wrong = {r: v[0] for r, v in self._replies.items() if v[0] != step}
             if wrong:
@@ -177,11 +180,27 @@ class CoordinatorNode(Node):
             return {r: v[1] for r, v in self._replies.items()}
 
     def _step_remote(self, inp: StepInput, commands: List[Command]) -> None:
-        self._step_replies = self._send_and_wait(coupling.STEP + inp.pack(), inp.step)
+        replies = self._send_and_wait(coupling.STEP + inp.pack(), inp.step)
+        # the scale nodes send their counters on diagnostics steps only: keep the last ones
+        self._replies_fresh = all(replies.get(r) for r in self._remote_roles)
+        if self._replies_fresh:
+            self._step_replies = replies
 
     def last_replies(self) -> Dict[int, bytes]:
-        """Return the reply bytes of each split scale node (by role) for the last step."""
-        return self._step_replies
+        """Return each split scale node's counters (reply bytes, by role) for the current state:
+        those of the last step if it carried them, else asked for now (if the nodes do not
+        answer, e.g. stopped by the same Ctrl-C: those of the last diagnostics step)."""
+        with self.twin.lock:
+            if self._replies_fresh or not self._scales_ready:
+                return self._step_replies
+            try:
+                self._step_replies = self._send_and_wait(
+                    coupling.COUNTERS, self.twin.step_index, COUNTERS_TIMEOUT)
+            except (TimeoutError, RuntimeError) as exc:
+                self.get_logger().warning(f'scale node counters unavailable: {exc}')
+                return self._step_replies
+            self._replies_fresh = True
+            return self._step_replies
 
     def wait_for_scales(self, timeout: float) -> bool:
         """Wait until every split scale node is connected both ways; return True if so."""
@@ -222,6 +241,8 @@ class CoordinatorNode(Node):
     def _on_step(self, request: Step.Request, response: Step.Response) -> Step.Response:
         if self.runner.mode is TimeMode.LOCKSTEP:
             self.runner.step(int(request.steps))
+            if self._remote_roles:
+                self.last_replies()  # the scale nodes' counters of this state, for the summary
         else:
             self.get_logger().warning(f'step service ignored in {self.runner.mode.value} mode')
         with self.twin.lock:
@@ -244,6 +265,7 @@ class CoordinatorNode(Node):
         with self.twin.lock:
             before_ns = self.twin.time_ns
             self.twin.reset(cell, int(request.seed))
+            self._replies_fresh = False
             if self._remote_roles:
                 payload = coupling.RESET + int(request.seed).to_bytes(8, 'little') + \
                     (request.cell_file or '').encode()
@@ -279,6 +301,7 @@ class CoordinatorNode(Node):
         try:
             with self.twin.lock:
                 if self._remote_roles:
+                    self._replies_fresh = False
                     ids = self._spawn_remote(type_index, x, y, yaw)
                 else:
                     ids = self._spawn(type_index, x, y, yaw)

@@ -4,7 +4,9 @@ Payloads travel as ``std_msgs/UInt8MultiArray`` CDR built and parsed by hand (no
 message objects). Topic names start with ``_`` so ``ros2 topic list`` hides them.
 
 Payload kinds (first byte): ``S`` step input, ``R`` reset (seed + cell file), ``P`` spawn
-request, ``D`` done (node role, step, reply bytes).
+request, ``C`` counters request, ``D`` done (node role, step, reply bytes). The done of a step
+carries the node's counters only on diagnostics steps (the ledger costs ~0.3 ms); the
+coordinator asks for them (``C``) when it needs them in between (the summary).
 
 Cells with ``macro``/``auto`` zones also couple the two scale nodes every step
 (:mod:`conveyor_twin.coord.mirror`): the micro node sends its state after its step on
@@ -23,6 +25,7 @@ EDITS_TOPIC = '_coupling/edits'
 STEP = b'S'
 RESET = b'R'
 SPAWN = b'P'
+COUNTERS = b'C'
 DONE = b'D'
 
 _PREFIX = struct.Struct('<4sIII')  # encapsulation, layout.dim length, data_offset, data length

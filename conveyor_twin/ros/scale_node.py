@@ -9,7 +9,7 @@ from std_msgs.msg import UInt8MultiArray
 from conveyor_twin.cell import load_cell
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.ros import coupling
-from conveyor_twin.ros.params import declare_twin_parameters
+from conveyor_twin.ros.params import declare_twin_parameters, DIAGNOSTICS_PERIOD_STEPS
 from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures
 
 MICRO_ROLE = 1
@@ -102,10 +102,15 @@ class ScaleNode(Node):
         self.finish_step(inp)
 
     def finish_step(self, inp: StepInput) -> None:
-        """Publish the step's streams and report the step done with the stage's counters."""
+        """Publish the step's streams and report the step done (with the stage's counters on
+        the coordinator's diagnostics steps)."""
         self.publish_step(inp)
-        self._report(inp.step, encode_counters(dict(self.stage.counters(),
-                                                    publish_failures=publish_failures(self))))
+        reply = self._counters() if inp.step % DIAGNOSTICS_PERIOD_STEPS == 0 else b''
+        self._report(inp.step, reply)
+
+    def _counters(self) -> bytes:
+        return encode_counters(dict(self.stage.counters(),
+                                    publish_failures=publish_failures(self)))
 
     def reset_stage(self, cell, seed: int) -> None:
         """Restart the stage (split layout reset)."""
@@ -128,6 +133,8 @@ class ScaleNode(Node):
             self._report(0)
         elif kind == coupling.SPAWN:
             self._report(self._last_step, self.spawn_reply(body))
+        elif kind == coupling.COUNTERS:
+            self._report(self._last_step, self._counters())
         else:
             self.get_logger().error(f'unknown coupling payload {kind!r}; ignored')
 
