@@ -7,6 +7,7 @@ composed in one process or split over three, and from one run to the next.
 import sys
 
 from conveyor_twin_msgs.msg import ActuatorCommand, BeltCommand
+from conveyor_twin_msgs.srv import Reset
 import pytest
 
 from conveyor_twin.cell import load_cell
@@ -33,6 +34,8 @@ SEQUENCE = (
     ('step', 250),
 )
 STEPS = sum(arg for kind, arg in SEQUENCE if kind == 'step')
+RESET_SEED = 3
+AFTER_RESET = 400  # steps after a reset in the hand-over test
 
 
 def _density_per_step(cell) -> int:
@@ -56,7 +59,16 @@ def _logs(tmp_path) -> str:
     return '\n'.join(f'--- {p.name}\n{p.read_text()[-2000:]}' for p in tmp_path.glob('*.log'))
 
 
-def run_composed(context, name: str, cell_file: str = ''):
+def _reset_and_step(driver: Driver, steps: int) -> None:
+    """Reset the twin (seed RESET_SEED) and step again, if ``steps``."""
+    if steps:
+        response = driver.call(driver.reset_client, Reset.Request(seed=RESET_SEED))
+        assert response.success, response.message
+        driver.step(steps)
+        driver.settle_edges()
+
+
+def run_composed(context, name: str, cell_file: str = '', after_reset: int = 0):
     cell = load_cell(cell_file or None)
     twin = ComposedTwin(cell, seed=SEED, mode=TimeMode.LOCKSTEP, context=context,
                         markers_rate=0.0)
@@ -65,6 +77,7 @@ def run_composed(context, name: str, cell_file: str = ''):
     try:
         assert driver.wait_connected(), 'composed twin not discovered'
         driver.run(SEQUENCE)
+        _reset_and_step(driver, after_reset)
         driver.twin_counters = twin.counters()
         return driver.digests(), driver.counts(), driver
     finally:
@@ -73,13 +86,14 @@ def run_composed(context, name: str, cell_file: str = ''):
 
 
 def run_split(context, ros_processes, tmp_path, tag: str, check_parameters: bool = False,
-              cell_file: str = ''):
+              cell_file: str = '', after_reset: int = 0):
     start_split(ros_processes, tmp_path, tag, cell_file)
     driver = Driver(context, density_per_step=_density_per_step(load_cell(cell_file or None)),
                     name='probe_' + tag)
     try:
         assert driver.wait_connected(), 'split twin not discovered\n' + _logs(tmp_path)
         driver.run(SEQUENCE)
+        _reset_and_step(driver, after_reset)
         if check_parameters:  # each process's real node declares the parameters
             for node in NODES:
                 check_node_parameters(driver, node, seed=SEED, mode='lockstep',
@@ -90,16 +104,17 @@ def run_split(context, ros_processes, tmp_path, tag: str, check_parameters: bool
         ros_processes.stop_all()
 
 
-def _assert_consecutive(driver: Driver) -> None:
+def _assert_consecutive(driver: Driver, after_reset: int = 0) -> None:
     received = driver.probe.received
+    steps = list(range(1, STEPS + 1)) + list(range(1, after_reset + 1))
     parts = [cdr.decode_part_states(d).step for d in received['parts']]
-    assert parts == list(range(1, STEPS + 1))
+    assert parts == steps
     barriers = [cdr.decode_light_barrier_states(d)[2] for d in received['light_barriers']]
-    assert barriers == list(range(1, STEPS + 1))
+    assert barriers == steps
     for topic in ('belt_states', 'actuator_states'):
         stamps = [int.from_bytes(d[4:8], 'little') * 10**9 + int.from_bytes(d[8:12], 'little')
                   for d in received[topic]]
-        assert stamps == [k * 1_000_000 for k in range(1, STEPS + 1)]
+        assert stamps == [k * 1_000_000 for k in steps]
 
 
 def test_split_streams_are_consecutive_and_identical_to_composed_and_reruns(
@@ -152,20 +167,21 @@ def test_split_hand_over_between_scales_is_identical_to_composed(
         ros_context, ros_processes, tmp_path):
     # The hand-over runs in the macro process on a mirror of the micro state (coord.mirror);
     # the edits go back to the micro process: every stream, the density and the ledger in the
-    # summary counters must match the composed layout's bit for bit.
+    # summary counters must match the composed layout's bit for bit, also after a reset.
     from conveyor_twin.coord.mirror import has_coupling
     cell_file = _coupled_cell_file(tmp_path)
     assert has_coupling(load_cell(cell_file))
     composed, composed_counts, composed_driver = run_composed(ros_context, 'probe_cc',
-                                                              cell_file)
-    _assert_consecutive(composed_driver)
-    assert composed_counts['density'] == 2 * STEPS
-    last = cdr.decode_light_barrier_states(composed_driver.probe.received['light_barriers'][-1])
+                                                              cell_file, AFTER_RESET)
+    _assert_consecutive(composed_driver, AFTER_RESET)
+    assert composed_counts['density'] == 2 * (STEPS + AFTER_RESET)
+    last = cdr.decode_light_barrier_states(
+        composed_driver.probe.received['light_barriers'][STEPS - 1])
     assert last[5][3] >= 4 and last[5][0] >= 2, 'the hash should cover macro and micro edges'
     assert len(cdr.decode_part_states(composed_driver.probe.received['parts'][-1]).id) >= 10
     split, split_counts, split_driver = run_split(ros_context, ros_processes, tmp_path, 'sc',
-                                                  cell_file=cell_file)
-    _assert_consecutive(split_driver)
+                                                  cell_file=cell_file, after_reset=AFTER_RESET)
+    _assert_consecutive(split_driver, AFTER_RESET)
     split_counts.pop('/clock')
     composed_counts.pop('/clock')
     assert split_counts == composed_counts, _logs(tmp_path)
@@ -173,6 +189,7 @@ def test_split_hand_over_between_scales_is_identical_to_composed(
     # the ledger comes from the macro process's counters (printed in the summary at exit)
     summary = _summary(tmp_path / 'sc_split.log')
     counters = composed_driver.twin_counters
+    # (after the reset: 400 steps at 600 parts/s switch tiles again)
     assert counters['macro_balance_captured'] > 50 and counters['macro_balance_released'] > 5
     assert abs(counters['macro_balance_residual']) <= 1e-9
     for key, value in counters.items():
