@@ -23,6 +23,8 @@ from conveyor_twin.micro.state import C_N, P_X, P_Y, PT_BRAD
 
 # Sub-samples per cell edge when the footprint disc is rasterised.
 DEPOSIT_SAMPLES = 8
+# Margin [m] of the test that skips cells apart from a footprint disc (far above round-off).
+_DISC_MARGIN = 1e-9
 
 
 @njit(cache=True)
@@ -74,18 +76,28 @@ def deposit_disc(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: flo
     rc = int(radius / h) + 1
     s = DEPOSIT_SAMPLES
     r2 = radius * radius
+    # cells whose box is clearly apart from the disc's box hold no sample in it (skipped)
+    reach = radius + _DISC_MARGIN
     total = 0.0
     for j in range(max(0, jc - rc), min(ny, jc + rc + 1)):
+        if oy + j * h - py > reach or py - (oy + (j + 1) * h) > reach:
+            continue
         for i in range(max(0, ic - rc), min(nx, ic + rc + 1)):
             if not active[j, i] or solid[j, i]:
+                continue
+            if ox + i * h - px > reach or px - (ox + (i + 1) * h) > reach:
                 continue
             total += _covered_samples(i, j, ox, oy, h, px, py, r2, s)
     inv = 1.0 / (h * h)
     if total > 0.0:
         scale = amount * inv / total
         for j in range(max(0, jc - rc), min(ny, jc + rc + 1)):
+            if oy + j * h - py > reach or py - (oy + (j + 1) * h) > reach:
+                continue
             for i in range(max(0, ic - rc), min(nx, ic + rc + 1)):
                 if not active[j, i] or solid[j, i]:
+                    continue
+                if ox + i * h - px > reach or px - (ox + (i + 1) * h) > reach:
                     continue
                 w = _covered_samples(i, j, ox, oy, h, px, py, r2, s)
                 if w:
@@ -166,6 +178,21 @@ def take_mask(rho: np.ndarray, mask: np.ndarray, h: float) -> float:
 
 
 @njit(cache=True)
+def take_cells(rho: np.ndarray, cells: np.ndarray, h: float) -> float:
+    """:func:`take_mask` over the flat row-major indices ``cells`` (ascending) of the mask."""
+    nx = rho.shape[1]
+    hh = h * h
+    total = 0.0
+    for c in cells:
+        j = c // nx
+        i = c - j * nx
+        if rho[j, i] != 0.0:
+            total += rho[j, i] * hh
+            rho[j, i] = 0.0
+    return total
+
+
+@njit(cache=True)
 def window_candidate(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.ndarray,
                      cur: np.ndarray, w: int, threshold: float, thr: np.ndarray,
                      out: np.ndarray) -> bool:
@@ -185,33 +212,33 @@ def window_candidate(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.
     while cur[0] < ranges.shape[0]:
         j0, j1, i0, i1 = ranges[cur[0], 0], ranges[cur[0], 1], ranges[cur[0], 2], ranges[cur[0], 3]
         bw = i1 - i0
-        size = (j1 - j0) * bw
-        for flat in range(cur[1], size):
-            j = j0 + flat // bw
-            i = i0 + flat - (flat // bw) * bw
-            # a window holding a part has a cell with 1 / (2 w + 1)^2 of it: only windows
-            # centred on such cells are tried (thin density is not scanned cell by cell)
-            if acc[j, i] * unit < min_centre or skip[j, i]:
-                continue
-            total = 0.0
-            cj = 0.0
-            ci = 0.0
-            for jj in range(max(0, j - w), min(ny, j + w + 1)):
-                for ii in range(max(0, i - w), min(nx, i + w + 1)):
-                    if skip[jj, ii]:
-                        continue
-                    a = acc[jj, ii] * unit
-                    total += a
-                    cj += a * jj
-                    ci += a * ii
-            if total >= threshold + thr[j, i]:
-                out[0] = j
-                out[1] = i
-                out[2] = total
-                out[3] = cj / total
-                out[4] = ci / total
-                cur[1] = flat
-                return True
+        js = j0 + cur[1] // bw  # the cursor's cell (row-major in the block)
+        ic = i0 + cur[1] % bw
+        for j in range(js, j1):
+            for i in range(ic if j == js else i0, i1):
+                # a window holding a part has a cell with 1 / (2 w + 1)^2 of it: only
+                # windows centred on such cells are tried (thin density is not scanned)
+                if acc[j, i] * unit < min_centre or skip[j, i]:
+                    continue
+                total = 0.0
+                cj = 0.0
+                ci = 0.0
+                for jj in range(max(0, j - w), min(ny, j + w + 1)):
+                    for ii in range(max(0, i - w), min(nx, i + w + 1)):
+                        if skip[jj, ii]:
+                            continue
+                        a = acc[jj, ii] * unit
+                        total += a
+                        cj += a * jj
+                        ci += a * ii
+                if total >= threshold + thr[j, i]:
+                    out[0] = j
+                    out[1] = i
+                    out[2] = total
+                    out[3] = cj / total
+                    out[4] = ci / total
+                    cur[1] = (j - j0) * bw + (i - i0)
+                    return True
         cur[0] += 1
         cur[1] = 0
     return False
@@ -270,6 +297,10 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
     cur = np.zeros(2, dtype=np.int64)
     gnx = active.shape[1]
     gny = active.shape[0]
+    k = offsets.shape[0]
+    omax = 0.0  # largest |offset| [diameters] (the reach of the spots around a window)
+    for oi in range(k):
+        omax = max(omax, abs(offsets[oi, 0]), abs(offsets[oi, 1]))
     while res[1] < max_fail:
         if not window_candidate(acc, skip, unit, ranges, cur, w, 1.0, thr, cand):
             break
@@ -298,7 +329,6 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
             t = fifo[fstate[0]]
         rt = pt[t, PT_BRAD]
         ok = False
-        k = offsets.shape[0]
         # any spot off the macro cells? (else the window waits, without a look at the parts)
         usable = False
         for oi in range(k):
@@ -315,7 +345,7 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
             cur[1] += 1
             continue
         # the parts near the window, so most candidates are refused without a full check
-        reach = d * (np.abs(offsets).max() + 1.0) + 2.0 * rt + d
+        reach = d * (omax + 1.0) + 2.0 * rt + d
         n = counters[C_N]
         m = 0
         for q in range(n):
@@ -387,3 +417,165 @@ def deposit_many(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: flo
     """Deposit one part's worth for every ``(x[k], y[k])`` [m] (:func:`deposit_disc`, in order)."""
     for k in range(x.size):
         deposit_disc(rho, active, solid, ox, oy, h, x[k], y[k], radius_of_type[types[k]], 1.0)
+
+
+@njit(cache=True)
+def deposit_push(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: float, oy: float,
+                 h: float, x: np.ndarray, y: np.ndarray, types: np.ndarray,
+                 radius_of_type: np.ndarray, fifo: np.ndarray, fstate: np.ndarray,
+                 by_type: np.ndarray) -> None:
+    """Deposit the captured parts (:func:`deposit_many`) and append their types to the FIFO.
+
+    ``fifo``/``fstate`` as in :func:`release_windows` (the caller has grown the ring so the
+    ``x.size`` new entries fit); ``by_type`` counts the captures per type.
+    """
+    size = fifo.size
+    tail = fstate[0] + fstate[1]
+    for k in range(x.size):
+        t = types[k]
+        deposit_disc(rho, active, solid, ox, oy, h, x[k], y[k], radius_of_type[t], 1.0)
+        fifo[(tail + k) % size] = t
+        by_type[t] += 1
+    fstate[1] += x.size
+
+
+@njit(cache=True)
+def accumulate_faces(outflow: np.ndarray, face_sink: np.ndarray, acc: np.ndarray,
+                     sides: np.ndarray) -> int:
+    """Add the boundary outflow [parts] of the faces that do not lead into a sink to ``acc``.
+
+    ``outflow``, ``face_sink`` and ``acc`` are ``(n_boundary,)`` in the grid's boundary-face
+    order, ``sides`` ``(4, 2)`` the face ranges of the left, right, bottom and top sides.
+    A side without any outflow is left alone. Return a bit mask of the sides (bit ``s``)
+    where a sink face has outflow (the caller sums it, as NumPy does).
+    """
+    flags = 0
+    for s in range(4):
+        a, b = sides[s, 0], sides[s, 1]
+        any_out = False
+        for f in range(a, b):
+            if outflow[f] != 0.0:
+                any_out = True
+                if face_sink[f]:
+                    flags |= 1 << s
+        if not any_out:
+            continue
+        for f in range(a, b):
+            acc[f] += 0.0 if face_sink[f] else outflow[f]
+    return flags
+
+
+@njit(cache=True)
+def side_max(acc: np.ndarray, sides: np.ndarray, out: np.ndarray) -> None:
+    """Write the largest accumulator value of each side to ``out`` ``(4,)`` [parts]."""
+    for s in range(4):
+        m = -np.inf
+        for f in range(sides[s, 0], sides[s, 1]):
+            m = max(m, acc[f])
+        out[s] = m
+
+
+@njit(cache=True)
+def hold_back_runs(rho: np.ndarray, runs: np.ndarray, m: int, solid: np.ndarray,
+                   vel: np.ndarray, ox: float, oy: float, h: float, rho_max: float,
+                   x: np.ndarray, y: np.ndarray, n: int, occ: np.ndarray) -> None:
+    """:func:`hold_back` visiting only the inactive cells (same order, same result).
+
+    ``runs[:m]`` ``(m, 3)`` holds ``(j, i0, i1)`` row runs of the inactive cells in row-major
+    order (:func:`inactive_runs`); they are swept backwards, as :func:`hold_back` sweeps all
+    cells. ``occ`` ``(ny, nx)`` is scratch (micro parts per cell).
+    """
+    ny, nx = rho.shape
+    occ[:, :] = 0.0
+    for k in range(n):
+        fx = (x[k] - ox) / h
+        fy = (y[k] - oy) / h
+        if fx < 0.0 or fy < 0.0 or fx >= nx or fy >= ny:
+            continue
+        occ[int(fy), int(fx)] += 1.0
+    hh = h * h
+    cap = rho_max * hh
+    for rr in range(m):
+        r = m - 1 - rr
+        j = runs[r, 0]
+        i0 = runs[r, 1]
+        i1 = runs[r, 2]
+        for ir in range(i1 - i0):
+            i = i1 - 1 - ir
+            if rho[j, i] <= 0.0:
+                continue
+            mass = rho[j, i] * hh
+            if mass <= cap - occ[j, i] or mass <= 0.0:
+                continue  # within the room max(0, cap - occ)
+            room = max(0.0, cap - occ[j, i])
+            vx = vel[j, i, 0]
+            vy = vel[j, i, 1]
+            if vx == 0.0 and vy == 0.0:
+                continue
+            if abs(vx) >= abs(vy):
+                jj, ii = j, i - (1 if vx > 0.0 else -1)
+            else:
+                jj, ii = j - (1 if vy > 0.0 else -1), i
+            if jj < 0 or ii < 0 or jj >= ny or ii >= nx or solid[jj, ii]:
+                continue
+            excess = (mass - room) / hh
+            rho[j, i] -= excess
+            rho[jj, ii] += excess
+
+
+@njit(cache=True)
+def inactive_runs(active: np.ndarray, runs: np.ndarray) -> int:
+    """Write the row runs ``(j, i0, i1)`` of the inactive cells, row-major; return how many."""
+    ny, nx = active.shape
+    m = 0
+    for j in range(ny):
+        i = 0
+        while i < nx:
+            if active[j, i]:
+                i += 1
+                continue
+            i0 = i
+            while i < nx and not active[j, i]:
+                i += 1
+            runs[m, 0] = j
+            runs[m, 1] = i0
+            runs[m, 2] = i
+            m += 1
+    return m
+
+
+@njit(cache=True)
+def micro_blocks(macro: np.ndarray, tc: int, ny: int, nx: int, out: np.ndarray) -> int:
+    """Write the cell blocks ``(j0, j1, i0, i1)`` of the micro tiles to ``out``; return how many.
+
+    The tiles come row-major (tile ``(ty, tx)`` covers cells ``ty tc .. (ty + 1) tc`` by
+    ``tx tc .. (tx + 1) tc``, clipped to the grid), scanned row-major within a block as
+    :func:`window_candidate` does. Neighbouring blocks are merged where the merged block is
+    scanned in the same cell order: side by side when one cell high, one above the other
+    when both span the whole grid width.
+    """
+    nty, ntx = macro.shape
+    m = 0
+    for ty in range(nty):
+        j0 = ty * tc
+        j1 = min(ny, j0 + tc)
+        for tx in range(ntx):
+            if macro[ty, tx]:
+                continue
+            i0 = tx * tc
+            i1 = min(nx, i0 + tc)
+            if (m > 0 and j1 - j0 == 1 and out[m - 1, 0] == j0 and out[m - 1, 1] == j1
+                    and out[m - 1, 3] == i0):
+                out[m - 1, 3] = i1
+            else:
+                out[m, 0] = j0
+                out[m, 1] = j1
+                out[m, 2] = i0
+                out[m, 3] = i1
+                m += 1
+            # a block spanning the grid width continues the one above it if that does too
+            if (m > 1 and out[m - 1, 2] == 0 and out[m - 1, 3] == nx and out[m - 2, 2] == 0
+                    and out[m - 2, 3] == nx and out[m - 2, 1] == out[m - 1, 0]):
+                out[m - 2, 1] = out[m - 1, 1]
+                m -= 1
+    return m

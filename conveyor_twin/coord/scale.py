@@ -59,6 +59,7 @@ from conveyor_twin.coord import handover as _ho
 from conveyor_twin.coord.macro_barriers import MacroBarrier
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.tiles import AutoTiles, CHECK_STEPS
+from conveyor_twin.coord.tiles import fill_cell_mask as _fill_cell_mask
 from conveyor_twin.macro.solver import MacroSim
 from conveyor_twin.micro.sim import MicroSim
 
@@ -99,10 +100,22 @@ class _Region:
             self.active = np.ones((g.ny, g.nx), dtype=np.uint8)
         self.face_ranges = [np.array([[0, g.ny, 0, 1]]), np.array([[0, g.ny, 0, 1]]),
                             np.array([[0, 1, 0, g.nx]]), np.array([[0, 1, 0, g.nx]])]
+        # scratch of the micro-tile blocks (one per tile at most) and the inactive row runs
+        n_tiles = self.tiles.macro.size if self.tiles is not None else 0
+        self._blocks = np.zeros((n_tiles, 4), dtype=np.int64)
+        self._runs = np.zeros((g.ny * ((g.nx + 1) // 2) if self.tiles is not None else 0, 3),
+                              dtype=np.int64)
+        self.n_runs = 0
         self.update_ranges()
-        # boundary faces: left/right (ny, 1), bottom/top (1, nx)
-        self.face_acc = [np.zeros((g.ny, 1)), np.zeros((g.ny, 1)), np.zeros((1, g.nx)),
-                         np.zeros((1, g.nx))]
+        # boundary faces, in the grid's boundary-face order (outflow): views of one array,
+        # left/right (ny, 1), bottom/top (1, nx)
+        ny, nx = g.ny, g.nx
+        self.acc_flat = np.zeros(2 * (ny + nx))
+        self.face_acc = [self.acc_flat[:ny].reshape(ny, 1),
+                         self.acc_flat[ny:2 * ny].reshape(ny, 1),
+                         self.acc_flat[2 * ny:2 * ny + nx].reshape(1, nx),
+                         self.acc_flat[2 * ny + nx:].reshape(1, nx)]
+        self.acc_max = np.zeros(4)
         self.face_skip = [np.zeros(a.shape, dtype=np.uint8) for a in self.face_acc]
         self.occ = np.zeros((g.ny, g.nx))
         self.w = max(1, int(math.ceil(radius / g.h)))
@@ -133,8 +146,9 @@ class _Region:
             self.face_sink |= ((face_out[:, 0] >= x0) & (face_out[:, 0] <= x1)
                                & (face_out[:, 1] >= y0) & (face_out[:, 1] <= y1))
         self.has_sink_cells = bool(self.sink_cells.any())
-        ny, nx = g.ny, g.nx
+        self.sink_index = np.flatnonzero(self.sink_cells).astype(np.int64)
         self.sides = [(0, ny), (ny, 2 * ny), (2 * ny, 2 * ny + nx), (2 * ny + nx, 2 * (ny + nx))]
+        self.side_array = np.array(self.sides, dtype=np.int64)
 
     def seed_phases(self, spread: float, state: int) -> None:
         """Draw every window's first arrival phase (``spread * u`` [parts], ``u`` uniform
@@ -146,15 +160,17 @@ class _Region:
             arr[...] = spread * gen.random(arr.shape) if spread > 0.0 else 0.0
 
     def update_ranges(self) -> None:
-        """List the cell blocks of the micro tiles (where released mass can wait)."""
+        """List the cell blocks of the micro tiles (where released mass can wait), merged
+        where the scan order is kept (:func:`~conveyor_twin.coord.handover.micro_blocks`),
+        and the row runs of the inactive cells (:func:`~.handover.inactive_runs`)."""
         t = self.tiles
         if t is None:
             self.ranges = np.zeros((0, 4), dtype=np.int64)
             return
         g = self.sim.grid
-        ty, tx = np.nonzero(~t.macro)
-        self.ranges = np.stack([ty * t.tc, np.minimum(g.ny, (ty + 1) * t.tc), tx * t.tc,
-                                np.minimum(g.nx, (tx + 1) * t.tc)], axis=1).astype(np.int64)
+        m = _ho.micro_blocks(t.macro, t.tc, g.ny, g.nx, self._blocks)
+        self.ranges = self._blocks[:m]
+        self.n_runs = _ho.inactive_runs(self.active, self._runs)
 
     def inactive_mass(self) -> float:
         """Mass in the cells of micro tiles (flowing on, released as whole parts) [parts]."""
@@ -168,19 +184,23 @@ class _Region:
         the density in the cells of micro tiles."""
         return self.inactive_mass() + sum(float(a.sum()) for a in self.face_acc)
 
-    def push_types(self, types: np.ndarray) -> None:
-        """Append part types to the FIFO (growing the ring buffer as needed)."""
+    def reserve_types(self, k: int) -> None:
+        """Grow the FIFO's ring buffer so ``k`` more types fit."""
         head, count = int(self.fstate[0]), int(self.fstate[1])
         size = self.fifo.size
-        k = types.size
         if count + k > size:
             new = np.zeros(max(2 * size, count + k), dtype=np.int64)
             new[:count] = np.roll(self.fifo, -head)[:count]
-            self.fifo, head, size = new, 0, new.size
+            self.fifo = new
             self.fstate[0] = 0
-        idx = (head + count + np.arange(k)) % size
+
+    def push_types(self, types: np.ndarray) -> None:
+        """Append part types to the FIFO (growing the ring buffer as needed)."""
+        self.reserve_types(types.size)
+        head, count = int(self.fstate[0]), int(self.fstate[1])
+        idx = (head + count + np.arange(types.size)) % self.fifo.size
         self.fifo[idx] = types
-        self.fstate[1] = count + k
+        self.fstate[1] = count + types.size
 
     def pop_types(self, k: int) -> np.ndarray:
         """Remove and return the ``k`` oldest types (type 0 for missing ones)."""
@@ -302,18 +322,17 @@ class ScaleCoupling:
         if count == 0:
             return
         parts = micro.remove(mask=mask)
-        _ho.deposit_many(sim.density, region.active, sim.solid, g.origin_x, g.origin_y, g.h,
-                         parts.x, parts.y, parts.part_type, self._radius_of_type)
+        region.reserve_types(count)
+        _ho.deposit_push(sim.density, region.active, sim.solid, g.origin_x, g.origin_y, g.h,
+                         parts.x, parts.y, parts.part_type, self._radius_of_type, region.fifo,
+                         region.fstate, self.captured_by_type)
         sim.parts_deposited += float(count)
         self.captured += count
-        types = parts.part_type.astype(np.int64)
-        region.push_types(types)
-        self.captured_by_type += np.bincount(types, minlength=self.n_types)[:self.n_types]
 
     def _sinks(self, region: _Region) -> None:
         sim = region.sim
         if region.has_sink_cells:
-            taken = _ho.take_mask(sim.density, region.sink_cells, sim.grid.h)
+            taken = _ho.take_cells(sim.density, region.sink_index, sim.grid.h)
             if taken:
                 sim.parts_taken += taken
                 self._left(region, taken)
@@ -331,15 +350,14 @@ class ScaleCoupling:
     def _accumulate(self, region: _Region) -> None:
         sim = region.sim
         out = sim.outflow
-        for side, (a, b) in enumerate(region.sides):
-            seg = out[a:b]
-            if not seg.any():
-                continue
-            sink = region.face_sink[a:b]
-            left = float(seg[sink].sum())
-            if left:
-                self._left(region, left)
-            region.face_acc[side].reshape(-1)[:] += np.where(sink, 0.0, seg)
+        flags = _ho.accumulate_faces(out, region.face_sink, region.acc_flat, region.side_array)
+        if flags:
+            # outflow into sinks, summed per side as before (NumPy's summation order)
+            for side, (a, b) in enumerate(region.sides):
+                if flags >> side & 1:
+                    left = float(out[a:b][region.face_sink[a:b]].sum())
+                    if left:
+                        self._left(region, left)
         if region.tiles is not None:
             self._hold_back(region)
 
@@ -347,23 +365,28 @@ class ScaleCoupling:
         """Keep the density in micro tiles within the room the micro parts leave."""
         sim, g = region.sim, region.sim.grid
         v = self.micro.state.P
-        _ho.hold_back(sim.density, region.active, sim.solid, sim.cell_velocity, g.origin_x,
-                      g.origin_y, g.h, sim.rho_max, v[0], v[1], self.micro.n, region.occ)
+        _ho.hold_back_runs(sim.density, region._runs, region.n_runs, sim.solid,
+                           sim.cell_velocity, g.origin_x, g.origin_y, g.h, sim.rho_max, v[0],
+                           v[1], self.micro.n, region.occ)
 
     def _release(self, region: _Region) -> None:
         g = region.sim.grid
         vc = region.sim.cell_velocity
-        off = self.radius + _CLEARANCE - 0.5 * g.h
-        x_end, y_end = g.origin_x + g.nx * g.h, g.origin_y + g.ny * g.h
-        sides = ((g.origin_x - off - g.h, g.origin_y, vc[:, :1], -1.0, 0.0),
-                 (x_end + off, g.origin_y, vc[:, -1:], 1.0, 0.0),
-                 (g.origin_x, g.origin_y - off - g.h, vc[:1], 0.0, -1.0),
-                 (g.origin_x, y_end + off, vc[-1:], 0.0, 1.0))
-        for acc, skip, thr, rng, (ox, oy, vel, nx_, ny_) in zip(
-                region.face_acc, region.face_skip, region.face_thr, region.face_ranges, sides):
-            if self._tries > 0 and acc.max() >= 1.0 / (2 * region.w + 1):
-                self._release_from(region, acc, skip, thr, 1.0, rng, ox, oy, vel, nx_, ny_,
-                                   False, region.rng)
+        _ho.side_max(region.acc_flat, region.side_array, region.acc_max)
+        least = 1.0 / (2 * region.w + 1)  # a window of 2 w + 1 faces holds a part
+        for side in range(4):
+            if not (self._tries > 0 and region.acc_max[side] >= least):
+                continue
+            off = self.radius + _CLEARANCE - 0.5 * g.h
+            x_end, y_end = g.origin_x + g.nx * g.h, g.origin_y + g.ny * g.h
+            ox, oy, vel, nx_, ny_ = (
+                (g.origin_x - off - g.h, g.origin_y, vc[:, :1], -1.0, 0.0),
+                (x_end + off, g.origin_y, vc[:, -1:], 1.0, 0.0),
+                (g.origin_x, g.origin_y - off - g.h, vc[:1], 0.0, -1.0),
+                (g.origin_x, y_end + off, vc[-1:], 0.0, 1.0))[side]
+            self._release_from(region, region.face_acc[side], region.face_skip[side],
+                               region.face_thr[side], 1.0, region.face_ranges[side], ox, oy,
+                               vel, nx_, ny_, False, region.rng)
         if region.tiles is not None and self._tries > 0 and region.ranges.shape[0]:
             # the density in micro tiles flows on until a window holds a whole part
             self._release_from(region, region.sim.density, region.active, region.thr, g.h * g.h,
@@ -397,7 +420,8 @@ class ScaleCoupling:
         self._apply_tiles(region)
 
     def _apply_tiles(self, region: _Region) -> None:
-        region.active[:] = region.tiles.cell_mask()
+        t = region.tiles
+        _fill_cell_mask(t.macro, t.tc, region.active)
         region.update_ranges()
         # the density of cells that turned micro is released as whole parts from now on
 

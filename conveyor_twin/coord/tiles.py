@@ -38,10 +38,59 @@ def mass_per_tile(rho: np.ndarray, h: float, tc: int, mass: np.ndarray) -> None:
     """Integrate the density per tile [parts] (``mass`` ``(nty, ntx)``, cleared here)."""
     mass[:, :] = 0.0
     ny, nx = rho.shape
+    nty, ntx = mass.shape
     hh = h * h
+    # per tile: rows ascending, cells ascending within a row (the summation order is fixed)
+    for j in range(ny):
+        ty = j // tc
+        for tx in range(ntx):
+            acc = mass[ty, tx]
+            for i in range(tx * tc, min(nx, (tx + 1) * tc)):
+                acc += rho[j, i] * hh
+            mass[ty, tx] = acc
+
+
+@njit(cache=True)
+def decide_tiles(x: np.ndarray, y: np.ndarray, n: int, ox: float, oy: float, h: float,
+                 rho: np.ndarray, tc: int, counts: np.ndarray, mass: np.ndarray,
+                 area: np.ndarray, macro: np.ndarray, locked: np.ndarray,
+                 last_switch: np.ndarray, step: int, dwell: int, to_macro: float,
+                 to_micro: float) -> int:
+    """Switch the tiles whose density crossed a threshold; return how many switched.
+
+    Tile density [parts/m^2]: the integrated ``rho`` of macro tiles, the micro part centres
+    of the others, over ``area`` [m^2]. A micro tile that is not ``locked`` turns macro above
+    ``to_macro``, a macro tile turns micro below ``to_micro`` or when locked, each at least
+    ``dwell`` steps after its last switch (``last_switch``, updated).
+    """
+    ny, nx = rho.shape
+    count_micro(x, y, n, ox, oy, h, nx, ny, tc, counts)
+    mass_per_tile(rho, h, tc, mass)
+    nty, ntx = macro.shape
+    switched = 0
+    for ty in range(nty):
+        for tx in range(ntx):
+            if step - last_switch[ty, tx] < dwell:
+                continue
+            if macro[ty, tx]:
+                if mass[ty, tx] / area[ty, tx] < to_micro or locked[ty, tx]:
+                    macro[ty, tx] = False
+                    last_switch[ty, tx] = step
+                    switched += 1
+            elif not locked[ty, tx] and counts[ty, tx] / area[ty, tx] > to_macro:
+                macro[ty, tx] = True
+                last_switch[ty, tx] = step
+                switched += 1
+    return switched
+
+
+@njit(cache=True)
+def fill_cell_mask(macro: np.ndarray, tc: int, active: np.ndarray) -> None:
+    """Write the ``(ny, nx)`` uint8 mask of the cells of macro tiles into ``active``."""
+    ny, nx = active.shape
     for j in range(ny):
         for i in range(nx):
-            mass[j // tc, i // tc] += rho[j, i] * hh
+            active[j, i] = 1 if macro[j // tc, i // tc] else 0
 
 
 def _segment_rect_near(a, b, rect, margin: float) -> bool:
@@ -116,26 +165,21 @@ class AutoTiles:
 
     def cell_mask(self) -> np.ndarray:
         """Return the ``(ny, nx)`` uint8 mask of the cells of macro tiles."""
-        full = np.repeat(np.repeat(self.macro, self.tc, axis=0), self.tc, axis=1)
-        return full[:self.grid.ny, :self.grid.nx].astype(np.uint8)
+        active = np.zeros((self.grid.ny, self.grid.nx), dtype=np.uint8)
+        fill_cell_mask(self.macro, self.tc, active)
+        return active
 
     def decide(self, step: int, x: np.ndarray, y: np.ndarray, n: int,
                rho: np.ndarray) -> bool:
         """Update the tile modes from the densities; return True if any tile switched."""
         g = self.grid
-        count_micro(x, y, n, g.origin_x, g.origin_y, g.h, g.nx, g.ny, self.tc, self.counts)
-        mass_per_tile(rho, g.h, self.tc, self.mass)
-        density = np.where(self.macro, self.mass, self.counts) / self.area
-        ready = (step - self.last_switch) >= self.dwell_steps
-        up = ~self.macro & ~self.locked & ready & (density > self.params.to_macro_density)
-        down = self.macro & ready & ((density < self.params.to_micro_density) | self.locked)
-        if not (up.any() or down.any()):
-            return False
-        self.macro[up] = True
-        self.macro[down] = False
-        self.last_switch[up | down] = step
-        self.switches += int(up.sum() + down.sum())
-        return True
+        p = self.params
+        switched = decide_tiles(x, y, n, g.origin_x, g.origin_y, g.h, rho, self.tc,
+                                self.counts, self.mass, self.area, self.macro, self.locked,
+                                self.last_switch, step, self.dwell_steps,
+                                float(p.to_macro_density), float(p.to_micro_density))
+        self.switches += switched
+        return switched > 0
 
     def force(self, macro: np.ndarray, step: int) -> None:
         """Set the tile modes (tests, tools); sensor windows stay micro."""
