@@ -25,6 +25,10 @@ from conveyor_twin.micro.state import C_N, P_X, P_Y, PT_BRAD
 DEPOSIT_SAMPLES = 8
 # Margin [m] of the test that skips cells apart from a footprint disc (far above round-off).
 _DISC_MARGIN = 1e-9
+# Bucket edge over the largest search reach of a release (keeps round-off off the edge).
+BUCKET_SLACK = 1.01
+# Buckets of the micro-part lookup per macro grid (the edge grows when more would be needed).
+BUCKETS = 1 << 14
 
 
 @njit(cache=True)
@@ -262,7 +266,8 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
                     ox: float, oy: float, h: float, vel: np.ndarray, offsets: np.ndarray,
                     d: float, nx_: float, ny_: float, along_flow: bool, grid: np.ndarray,
                     active: np.ndarray, max_fail: int, cand: np.ndarray, rot: np.ndarray,
-                    near: np.ndarray, fifo: np.ndarray, fstate: np.ndarray,
+                    near: np.ndarray, bhead: np.ndarray, bnext: np.ndarray,
+                    fifo: np.ndarray, fstate: np.ndarray,
                     released_by_type: np.ndarray, thr: np.ndarray, rng: np.ndarray, counters,
                     ids, ptype, P,
                     pt, shp, shp_verts, act_state, act_verts, va, vb, out) -> np.ndarray:
@@ -279,7 +284,9 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
     (``grid = (x0, y0, h)``, mask ``active``) are refused, so a released part is not captured
     again. After ``max_fail`` refused placements the rest waits. ``rot[0]`` rotates the first
     offset tried from one part to the next (stride 7), so consecutive parts spread over the
-    window.
+    window. The micro parts near a window are looked up in buckets (:func:`bucket_parts`;
+    ``near`` ``(capacity,)``, ``bnext`` ``(capacity,)`` and ``bhead`` are scratch), built at
+    the first window that needs them; parts placed here are added to them.
 
     Part types: ``fifo`` is the zone's ring buffer of the types of the parts deposited,
     ``fstate = (head, count, untyped)``; each released part takes the type at the head (FIFO
@@ -301,6 +308,13 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
     omax = 0.0  # largest |offset| [diameters] (the reach of the spots around a window)
     for oi in range(k):
         omax = max(omax, abs(offsets[oi, 0]), abs(offsets[oi, 1]))
+    # bucket edge [m]: above the reach of any part type's search below
+    brad = 0.0
+    for tt in range(pt.shape[0]):
+        brad = max(brad, pt[tt, PT_BRAD])
+    bbox = np.zeros(5)
+    bbox[2] = BUCKET_SLACK * (d * (omax + 1.0) + 2.0 * brad + d)
+    built = False
     while res[1] < max_fail:
         if not window_candidate(acc, skip, unit, ranges, cur, w, 1.0, thr, cand):
             break
@@ -346,12 +360,11 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
             continue
         # the parts near the window, so most candidates are refused without a full check
         reach = d * (omax + 1.0) + 2.0 * rt + d
-        n = counters[C_N]
-        m = 0
-        for q in range(n):
-            if abs(P[P_X, q] - x) < reach and abs(P[P_Y, q] - y) < reach:
-                near[m] = q
-                m += 1
+        if not built:
+            bucket_parts(P, counters[C_N], grid[0], grid[1], gnx * grid[2], gny * grid[2],
+                         bbox, bhead, bnext)
+            built = True
+        m = near_parts(P, x, y, reach, bbox, bhead, bnext, near)
         for o in range(k):
             oi = (o + rot[0]) % k
             along = offsets[oi, 0]
@@ -381,6 +394,7 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
                         shp_verts, act_state, act_verts, va, vb, out)
             if pid != 0:
                 ok = True
+                bucket_add(P, counters[C_N] - 1, bbox, bhead, bnext)
                 break
             res[1] += 1
         rot[0] = (rot[0] + 7) % k
@@ -398,6 +412,78 @@ def release_windows(acc: np.ndarray, skip: np.ndarray, unit: float, ranges: np.n
             continue
         cur[1] += 1
     return res
+
+
+@njit(cache=True)
+def _bucket_of(P: np.ndarray, q: int, bbox: np.ndarray) -> int:
+    """Return the bucket of part ``q`` (coordinates clamped to the bucket grid)."""
+    fx = (P[P_X, q] - bbox[0]) / bbox[2]
+    fy = (P[P_Y, q] - bbox[1]) / bbox[2]
+    nbx = int(bbox[3])
+    nby = int(bbox[4])
+    bx = min(int(fx), nbx - 1) if fx >= 0.0 else 0
+    by = min(int(fy), nby - 1) if fy >= 0.0 else 0
+    return by * nbx + bx
+
+
+@njit(cache=True)
+def bucket_parts(P: np.ndarray, n: int, x0: float, y0: float, width: float, height: float,
+                 bbox: np.ndarray, bhead: np.ndarray, bnext: np.ndarray) -> None:
+    """Sort the parts ``k < n`` into square buckets over the box ``(x0, y0)`` + ``(width,
+    height)`` [m] with a margin of one bucket (parts outside go to the border buckets).
+
+    ``bbox`` ``(5,)``: the bucket edge [m] in ``bbox[2]`` on entry (doubled until the buckets
+    fit ``bhead``); on return ``(bx0, by0, edge, nbx, nby)``. ``bhead`` holds each bucket's
+    first part (-1: none), ``bnext`` each part's next one.
+    """
+    edge = bbox[2]
+    while True:
+        nbx = int((width + 2.0 * edge) / edge) + 1
+        nby = int((height + 2.0 * edge) / edge) + 1
+        if nbx * nby <= bhead.size:
+            break
+        edge *= 2.0
+    bbox[0] = x0 - edge
+    bbox[1] = y0 - edge
+    bbox[2] = edge
+    bbox[3] = nbx
+    bbox[4] = nby
+    bhead[:nbx * nby] = -1
+    for q in range(n):
+        bucket_add(P, q, bbox, bhead, bnext)
+
+
+@njit(cache=True)
+def bucket_add(P: np.ndarray, q: int, bbox: np.ndarray, bhead: np.ndarray,
+               bnext: np.ndarray) -> None:
+    """Add part ``q`` to its bucket (see :func:`bucket_parts`)."""
+    b = _bucket_of(P, q, bbox)
+    bnext[q] = bhead[b]
+    bhead[b] = q
+
+
+@njit(cache=True)
+def near_parts(P: np.ndarray, x: float, y: float, reach: float, bbox: np.ndarray,
+               bhead: np.ndarray, bnext: np.ndarray, near: np.ndarray) -> int:
+    """Write the parts with ``|dx|, |dy| < reach`` [m] of ``(x, y)`` [m] to ``near``; return
+    how many. ``reach`` must not exceed the bucket edge (the 3 x 3 buckets around hold them).
+    """
+    nbx = int(bbox[3])
+    nby = int(bbox[4])
+    fx = (x - bbox[0]) / bbox[2]
+    fy = (y - bbox[1]) / bbox[2]
+    cx = min(int(fx), nbx - 1) if fx >= 0.0 else 0
+    cy = min(int(fy), nby - 1) if fy >= 0.0 else 0
+    m = 0
+    for by in range(max(0, cy - 1), min(nby, cy + 2)):
+        for bx in range(max(0, cx - 1), min(nbx, cx + 2)):
+            q = bhead[by * nbx + bx]
+            while q >= 0:
+                if abs(P[P_X, q] - x) < reach and abs(P[P_Y, q] - y) < reach:
+                    near[m] = q
+                    m += 1
+                q = bnext[q]
+    return m
 
 
 @njit(cache=True)

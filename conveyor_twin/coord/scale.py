@@ -260,6 +260,8 @@ class ScaleCoupling:
         self.max_residual = 0.0
         self._mask = np.zeros(self.micro.state.capacity, dtype=np.bool_)
         self._near = np.zeros(self.micro.state.capacity, dtype=np.int64)
+        self._bnext = np.zeros(self.micro.state.capacity, dtype=np.int64)
+        self._bhead = np.zeros(_ho.BUCKETS, dtype=np.int64)
         # footprint radius of each part type [m]: the disc of equal area
         self._radius_of_type = np.array([math.sqrt(p.footprint_area / math.pi)
                                          for p in cell.part_types])
@@ -403,7 +405,8 @@ class ScaleCoupling:
         res = _ho.release_windows(acc, skip, unit, ranges, w, ox, oy, h, vel, region.offsets,
                                   2.0 * self.radius + _CLEARANCE, nx_, ny_, along_flow,
                                   region.grid_box, region.active, self._tries, self._cand,
-                                  region.rot, self._near, region.fifo, region.fstate,
+                                  region.rot, self._near, self._bhead, self._bnext,
+                                  region.fifo, region.fstate,
                                   self.released_by_type, thr, rng, s.counters, s.ids,
                                   s.part_type, s.P, m.pt, m.shapes, m.shape_verts, m.act_state,
                                   m.act_verts, m._va, m._vb, m._out)

@@ -99,7 +99,7 @@ def advance(nsteps: int, nsub: int, dts: float, parity: np.ndarray, rho: np.ndar
             out_total: np.ndarray, ax: np.ndarray, ay: np.ndarray, slope: np.ndarray,
             seed: np.ndarray, yr: np.ndarray, yr_op: np.ndarray, eps: float, w: np.ndarray,
             dx: np.ndarray, dy: np.ndarray, gx: np.ndarray, gy: np.ndarray, lohi: np.ndarray,
-            rng: np.ndarray) -> None:
+            rng: np.ndarray) -> int:
     """Advance ``nsteps`` twin steps of ``nsub`` substeps of ``dts`` [s] each, in place.
 
     ``parity[0]`` counts substeps (the sweep order alternates with it). ``wx``, ``wy`` are the
@@ -109,7 +109,8 @@ def advance(nsteps: int, nsub: int, dts: float, parity: np.ndarray, rho: np.ndar
     belt field (:func:`conveyor_twin.macro.fluxes.y_ranges`); ``yr_op``: work of the same
     shape (merged with the operator's faces). Other arguments as in
     :func:`conveyor_twin.macro.fluxes.sweep_x` and
-    :func:`conveyor_twin.macro.collision.collision_operator`.
+    :func:`conveyor_twin.macro.collision.collision_operator`. Return a bit mask: 1 if any
+    ``in_acc`` entry is nonzero, 2 if any ``out_acc`` entry is.
     """
     in_acc[:] = 0.0
     out_acc[:] = 0.0
@@ -132,8 +133,15 @@ def advance(nsteps: int, nsub: int, dts: float, parity: np.ndarray, rho: np.ndar
                 _fx.sweep_x(rho, wx, solid, dts, h, rho_max, capped, limited, limiter,
                             in_rate, in_acc, out_acc, ax, slope, seed)
             parity[0] += 1
+    flags = 0
     for i in range(out_acc.size):
         out_total[i] += out_acc[i]
+        if out_acc[i] != 0.0:
+            flags |= 2
+    for i in range(in_acc.size):
+        if in_acc[i] != 0.0:
+            flags |= 1
+    return flags
 
 
 class MacroSim:
@@ -294,7 +302,7 @@ class MacroSim:
         if speeds.shape != self._speeds.shape:
             msg = f'expected {self._speeds.size} belt speeds, got shape {speeds.shape}'
             raise ValueError(msg)
-        if np.array_equal(speeds, self._speeds):
+        if speeds.tolist() == self._speeds.tolist():  # np.array_equal, without its overhead
             return
         self._speeds[:] = speeds
         self._rebuild()
@@ -313,7 +321,9 @@ class MacroSim:
         if rates is None:
             rates = (positions - self._positions) / self.dt
         rates = np.asarray(rates, dtype=np.float64)
-        if np.array_equal(positions, self._positions) and np.array_equal(rates, self._rates):
+        # np.array_equal (shapes checked above), without its overhead
+        if positions.tolist() == self._positions.tolist() and (
+                rates.shape == self._rates.shape and rates.tolist() == self._rates.tolist()):
             return
         self._positions[:] = positions
         self._rates[:] = rates
@@ -338,14 +348,17 @@ class MacroSim:
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` twin steps; :attr:`inflow` / :attr:`outflow` hold this call's amounts."""
-        advance(int(n), self.substeps, self.dt / self.substeps, self._parity, self._rho,
+        flags = advance(int(n), self.substeps, self.dt / self.substeps, self._parity, self._rho,
                 self._ux, self._uy, self._wx, self._wy, self._use_op, self._solid,
                 self.grid.h, self.rho_max, self.capacity_guard, self._limited, self.limiter,
                 self._in_rate, self.inflow, self.outflow, self.outflow_total, self._ax,
                 self._ay, self._slope, self._seed, self._yr, self._yr_op, self.epsilon,
                 self._w, self._dx, self._dy, self._gx, self._gy, self._lohi, self._rng)
-        self.parts_in += float(self.inflow.sum())
-        self.parts_out += float(self.outflow.sum())
+        # all-zero amounts add nothing (the sums are skipped, not changed)
+        if flags & 1:
+            self.parts_in += float(self.inflow.sum())
+        if flags & 2:
+            self.parts_out += float(self.outflow.sum())
         if self._has_pending:
             # Actuator sweeps since the last call (already in parts_out / outflow_total).
             self.outflow += self._pending_out
