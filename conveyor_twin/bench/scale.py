@@ -10,14 +10,16 @@ then the policy runs. Each case runs ``--warmup`` steps, then ``--steps`` timed 
 whole :class:`~conveyor_twin.coord.twin.Twin` (micro, macro, hand-over, ledger); the table
 gives median, p99 and mean per 1 ms step and the parts on the cell at the end.
 
-Measured here (2 shared cores, load average 3-3.5 from other jobs, one full run after the
-hand-over rework of issue 6's last gaps, medians with p99 in brackets): pure micro 5,000 parts
-0.13 ms (0.66); multi-scale 5,000 parts 0.50 ms (1.5), 100,000 parts 0.48 ms (1.2) with ~1,070
-micro parts in the sensor windows. The 100,000-part target (median <= 1 ms, p99 <= 1.5 ms) was
-met in that run (an earlier run at load ~1.5 before the rework: 0.58 ms, p99 3.0 ms). At 5,000
-parts pure micro is faster than multi-scale (speed-up 0.3x; 0.8x in the earlier run): free
-flow is cheap at the micro scale and the hand-over releases ~5 parts per step at the sensor
-windows, each placement checked against the micro parts.
+Measured here (2 shared cores, load average 1-3 from other jobs; three interleaved runs of the
+code before and after the hand-over speed-up, bit-identical results; medians of the runs'
+medians, p99 in brackets): multi-scale 5,000 parts 0.47 -> 0.23 ms (1.3 -> 0.56), 20,000
+parts 0.51 -> 0.30 ms (1.3 -> 0.59), 100,000 parts 0.67 -> 0.54 ms (1.4 -> 0.85) with ~1,070
+micro parts in the sensor windows; pure micro 5,000 parts 0.23 ms (0.77). So at 5,000 parts
+multi-scale now runs at about the speed of pure micro (1.0x, runs 0.75-1.2x; 0.48x before):
+free flow is cheap at the micro scale, and the multi-scale step still pays the macro solver
+over the whole 30 m grid (~0.06 ms) and ~5 hand-overs each way per step. At 100,000 parts the
+micro step of the ~1,000-1,600 parts at the sensor windows (~0.25 ms) and ~12 releases and
+captures per step (each release checked against all micro parts by ``place``) dominate.
 """
 
 import argparse
