@@ -119,6 +119,27 @@ def deposit_disc(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: flo
 
 
 @njit(cache=True)
+def push_upstream(rho: np.ndarray, solid: np.ndarray, vel: np.ndarray, j: int, i: int,
+                  excess: float) -> None:
+    """Move ``excess`` [parts/m^2] of cell ``(j, i)`` to its upstream neighbour along the
+    dominant component of the cell velocity ``vel[j, i]`` (nothing if the velocity is zero or
+    that neighbour is outside the grid or solid)."""
+    ny, nx = rho.shape
+    vx = vel[j, i, 0]
+    vy = vel[j, i, 1]
+    if vx == 0.0 and vy == 0.0:
+        return
+    if abs(vx) >= abs(vy):
+        jj, ii = j, i - (1 if vx > 0.0 else -1)
+    else:
+        jj, ii = j - (1 if vy > 0.0 else -1), i
+    if jj < 0 or ii < 0 or jj >= ny or ii >= nx or solid[jj, ii]:
+        return
+    rho[j, i] -= excess
+    rho[jj, ii] += excess
+
+
+@njit(cache=True)
 def hold_back(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, vel: np.ndarray, ox: float,
               oy: float, h: float, rho_max: float, x: np.ndarray, y: np.ndarray, n: int,
               occ: np.ndarray) -> None:
@@ -152,19 +173,7 @@ def hold_back(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, vel: np.nd
             m = rho[j, i] * hh
             if m <= room:
                 continue
-            vx = vel[j, i, 0]
-            vy = vel[j, i, 1]
-            if vx == 0.0 and vy == 0.0:
-                continue
-            if abs(vx) >= abs(vy):
-                jj, ii = j, i - (1 if vx > 0.0 else -1)
-            else:
-                jj, ii = j - (1 if vy > 0.0 else -1), i
-            if jj < 0 or ii < 0 or jj >= ny or ii >= nx or solid[jj, ii]:
-                continue
-            excess = (m - room) / hh
-            rho[j, i] -= excess
-            rho[jj, ii] += excess
+            push_upstream(rho, solid, vel, j, i, (m - room) / hh)
 
 
 @njit(cache=True)
@@ -594,19 +603,7 @@ def hold_back_runs(rho: np.ndarray, runs: np.ndarray, m: int, solid: np.ndarray,
             if mass <= cap - occ[j, i] or mass <= 0.0:
                 continue  # within the room max(0, cap - occ)
             room = max(0.0, cap - occ[j, i])
-            vx = vel[j, i, 0]
-            vy = vel[j, i, 1]
-            if vx == 0.0 and vy == 0.0:
-                continue
-            if abs(vx) >= abs(vy):
-                jj, ii = j, i - (1 if vx > 0.0 else -1)
-            else:
-                jj, ii = j - (1 if vy > 0.0 else -1), i
-            if jj < 0 or ii < 0 or jj >= ny or ii >= nx or solid[jj, ii]:
-                continue
-            excess = (mass - room) / hh
-            rho[j, i] -= excess
-            rho[jj, ii] += excess
+            push_upstream(rho, solid, vel, j, i, (mass - room) / hh)
 
 
 @njit(cache=True)
