@@ -1,4 +1,6 @@
-"""The bench's machine figures: CPU stolen by the hypervisor from two /proc/stat readings."""
+"""The bench's machine figures: CPU stolen by the hypervisor, and clock gaps of a reading loop."""
+
+import numpy as np
 
 from conveyor_twin.bench.twin import cpu_times, steal_percent
 
@@ -14,3 +16,24 @@ def test_steal_share_of_all_cpu_time():
 def test_cpu_times_reads_this_machine():
     times = cpu_times()
     assert times is None or (len(times) >= 8 and all(t >= 0 for t in times))
+
+
+def test_clock_gaps_are_classified_by_length():
+    from conveyor_twin.bench.host import classify
+    ns = np.array([0.6e6, 0.9e6, 1.5e6, 3e6, 7e6, 50e6], dtype=np.int64)
+    counts = classify(ns)
+    assert counts == {'0.5-1 ms': 2, '1-2 ms': 1, '2-5 ms': 1, '5-20 ms': 1, '>20 ms': 1,
+                      'over_1ms': 4}
+
+
+def test_clock_gaps_see_a_sleep_of_the_reading_thread():
+    import threading
+    import time
+
+    from conveyor_twin.bench.host import clock_gaps
+    # a second thread holding the GIL for ~20 ms stops the reading loop for about that long
+    hold = threading.Thread(target=lambda: (time.sleep(0.05), sum(range(3_000_000))))
+    hold.start()
+    gaps = clock_gaps(0.5)
+    hold.join()
+    assert gaps.size >= 1 and gaps.max() > 2e6

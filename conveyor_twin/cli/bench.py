@@ -11,6 +11,7 @@ BENCHES = {
     'record': 'conveyor_twin.bench.record',
     'twin': 'conveyor_twin.bench.twin',
     'scale': 'conveyor_twin.bench.scale',
+    'host': 'conveyor_twin.bench.host',
 }
 
 
