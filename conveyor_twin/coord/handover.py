@@ -18,6 +18,7 @@ import math
 from numba import njit
 import numpy as np
 
+from conveyor_twin.coord.tiles import count_micro
 from conveyor_twin.micro.sources import place
 from conveyor_twin.micro.state import C_N, P_X, P_Y, PT_BRAD
 
@@ -154,13 +155,7 @@ def hold_back(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, vel: np.nd
     ``(ny, nx)`` is scratch (micro parts per cell).
     """
     ny, nx = rho.shape
-    occ[:, :] = 0.0
-    for k in range(n):
-        fx = (x[k] - ox) / h
-        fy = (y[k] - oy) / h
-        if fx < 0.0 or fy < 0.0 or fx >= nx or fy >= ny:
-            continue
-        occ[int(fy), int(fx)] += 1.0
+    count_micro(x, y, n, ox, oy, h, nx, ny, 1, occ)  # part centres per cell
     hh = h * h
     for jr in range(ny):
         for ir in range(nx):
@@ -581,13 +576,7 @@ def hold_back_runs(rho: np.ndarray, runs: np.ndarray, m: int, solid: np.ndarray,
     cells. ``occ`` ``(ny, nx)`` is scratch (micro parts per cell).
     """
     ny, nx = rho.shape
-    occ[:, :] = 0.0
-    for k in range(n):
-        fx = (x[k] - ox) / h
-        fy = (y[k] - oy) / h
-        if fx < 0.0 or fy < 0.0 or fx >= nx or fy >= ny:
-            continue
-        occ[int(fy), int(fx)] += 1.0
+    count_micro(x, y, n, ox, oy, h, nx, ny, 1, occ)  # part centres per cell
     hh = h * h
     cap = rho_max * hh
     for rr in range(m):
