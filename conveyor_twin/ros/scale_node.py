@@ -1,6 +1,7 @@
 """What the two scale nodes share: the split-layout coupling and the markers cadence."""
 
 import json
+import time
 from typing import Dict, Optional
 
 from rclpy.node import Node
@@ -15,6 +16,7 @@ from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures
 MICRO_ROLE = 1
 MACRO_ROLE = 2
 CONNECT_PERIOD = 0.01  # s between checks that the scale exchange is matched (split layout)
+DONE_MATCH_TIMEOUT = 10.0  # s the first reply waits for its writer to see the coordinator
 
 
 def encode_counters(counters: Dict[str, float]) -> bytes:
@@ -118,6 +120,8 @@ class ScaleNode(Node):
 
     def _report(self, step: int, reply: bytes = b'') -> None:
         self._last_step = step
+        if not self._done_matched:
+            self._done_matched = self._wait_done_matched()
         self._done_pub.publish(coupling.to_cdr(coupling.done(self.role, step, reply)))
 
     def _on_coupling(self, data: bytes) -> None:
@@ -138,4 +142,21 @@ class ScaleNode(Node):
         else:
             self.get_logger().error(f'unknown coupling payload {kind!r}; ignored')
 
+    def _wait_done_matched(self) -> bool:
+        """Wait until the reply writer has matched the coordinator's reader; return True if
+        so. Discovery is not symmetric: the coordinator can see this node's writer (and send
+        its first payload) before this writer sees the coordinator's reader, and a volatile
+        reliable writer never delivers what it published before that match, so the first
+        reply would be lost. Discovery runs in the middleware's threads: waiting here in a
+        callback is safe."""
+        deadline = time.monotonic() + DONE_MATCH_TIMEOUT
+        while self._done_pub.get_subscription_count() < 1:
+            if time.monotonic() > deadline:
+                self.get_logger().warning('the coordinator does not see the step replies yet; '
+                                          'replying anyway')
+                return False
+            time.sleep(0.005)
+        return True
+
     _last_step = 0
+    _done_matched = False
