@@ -9,13 +9,12 @@ import sys
 from typing import Dict, List, Optional
 
 from conveyor_twin_msgs.msg import DensityGrid
-from std_msgs.msg import UInt8MultiArray
 
 from conveyor_twin.coord.mirror import has_coupling, MacroSide
 from conveyor_twin.coord.stages import MacroStage
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.ros import coupling
-from conveyor_twin.ros.qos import COUPLING_QOS, raw_publish, STREAM_QOS
+from conveyor_twin.ros.qos import raw_publish, STREAM_QOS
 from conveyor_twin.ros.scale_node import MACRO_ROLE, ScaleNode
 from conveyor_twin.wire import cdr
 
@@ -32,31 +31,16 @@ class MacroNode(ScaleNode):
         self.density_pub = self.create_publisher(DensityGrid, 'density', STREAM_QOS)
         self._pub_density = raw_publish(self.density_pub, self.get_logger())
         self._side: Optional[MacroSide] = None  # the hand-over on a micro mirror (split)
-        self._pending: Optional[StepInput] = None  # stepped, waiting for the micro state
         self._states: Dict[int, memoryview] = {}  # micro states by step, arrived early
         if self.remote and has_coupling(stage.cell):
             # the mirror never runs sources: its seed does not matter
             self._side = MacroSide(stage, stage.cell, 0)
-            self.edits_pub = self.create_publisher(UInt8MultiArray, coupling.EDITS_TOPIC,
-                                                   COUPLING_QOS)
-            self._pub_edits = raw_publish(self.edits_pub, self.get_logger())
-            self._state_sub = self.create_subscription(
-                UInt8MultiArray, coupling.MICRO_STATE_TOPIC, self._on_micro_state,
-                COUPLING_QOS, raw=True)
+            self.open_exchange(coupling.EDITS_TOPIC, coupling.MICRO_STATE_TOPIC,
+                               self._on_micro_state)
         self.serve_coordinator()
 
-    def peers_matched(self) -> bool:
-        """Return True once the micro node's exchange is matched both ways (if coupled)."""
-        return self._side is None or (self.edits_pub.get_subscription_count() >= 1
-                                      and self._state_sub.get_publisher_count() >= 1)
-
-    def advance_remote(self, inp: StepInput) -> None:
-        """Step the grids; with a coupled cell hand over once the micro state has arrived."""
-        self.stage.advance(inp)
-        if self._side is None:
-            self.finish_step(inp)
-            return
-        self._pending = inp
+    def exchange(self, inp: StepInput) -> None:
+        """Hand over once the micro state of the step has arrived."""
         self._couple()
 
     def _on_micro_state(self, data: bytes) -> None:
@@ -76,7 +60,7 @@ class MacroNode(ScaleNode):
             self._states.clear()
         self._pending = None
         reply = self._side.couple(inp, state)
-        self._pub_edits(coupling.to_cdr(coupling.stamped(inp.step, reply)))
+        self.send_exchange(coupling.to_cdr(coupling.stamped(inp.step, reply)))
         self.finish_step(inp)
 
     def reset_stage(self, cell, seed: int) -> None:

@@ -13,7 +13,6 @@ from typing import List, Optional
 
 from conveyor_twin_msgs.msg import LightBarrierEdge, LightBarrierStates, PartStates
 import numpy as np
-from std_msgs.msg import UInt8MultiArray
 from visualization_msgs.msg import MarkerArray
 
 from conveyor_twin.coord.mirror import has_coupling, MicroSide
@@ -22,7 +21,7 @@ from conveyor_twin.coord.stages import MicroStage
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.ros.markers import CellMarkers
 from conveyor_twin.ros import coupling
-from conveyor_twin.ros.qos import COUPLING_QOS, EDGE_QOS, raw_publish, SLOW_QOS, STREAM_QOS
+from conveyor_twin.ros.qos import EDGE_QOS, raw_publish, SLOW_QOS, STREAM_QOS
 from conveyor_twin.ros.scale_node import MICRO_ROLE, ScaleNode
 from conveyor_twin.wire import cdr
 
@@ -59,29 +58,14 @@ class MicroNode(ScaleNode):
                                                     name='conveyor_twin_markers', daemon=True)
             self._markers_thread.start()
         self._side = None  # the scale hand-over's micro half (split layout, coupled cells)
-        self._pending: Optional[StepInput] = None  # stepped, waiting for the edits
         if self.remote and has_coupling(cell):
             self._side = MicroSide(stage)
-            self.state_pub = self.create_publisher(UInt8MultiArray, coupling.MICRO_STATE_TOPIC,
-                                                   COUPLING_QOS)
-            self._pub_state = raw_publish(self.state_pub, self.get_logger())
-            self._edits_sub = self.create_subscription(
-                UInt8MultiArray, coupling.EDITS_TOPIC, self._on_edits, COUPLING_QOS, raw=True)
+            self.open_exchange(coupling.MICRO_STATE_TOPIC, coupling.EDITS_TOPIC, self._on_edits)
         self.serve_coordinator()
 
-    def peers_matched(self) -> bool:
-        """Return True once the macro node's exchange is matched both ways (if coupled)."""
-        return self._side is None or (self.state_pub.get_subscription_count() >= 1
-                                      and self._edits_sub.get_publisher_count() >= 1)
-
-    def advance_remote(self, inp: StepInput) -> None:
-        """Step; with a coupled cell send the state to the macro node and wait for its edits."""
-        self.stage.advance(inp)
-        if self._side is None:
-            self.finish_step(inp)
-            return
-        self._pending = inp
-        self._pub_state(coupling.to_cdr(coupling.stamped(inp.step, self._side.state_bytes())))
+    def exchange(self, inp: StepInput) -> None:
+        """Send the step's micro state to the macro node (its edits finish the step)."""
+        self.send_exchange(coupling.to_cdr(coupling.stamped(inp.step, self._side.state_bytes())))
 
     def _on_edits(self, data: bytes) -> None:
         """Replay the macro node's hand-over edits of the pending step, then finish it."""

@@ -11,7 +11,7 @@ from conveyor_twin.cell import load_cell
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.ros import coupling
 from conveyor_twin.ros.params import declare_twin_parameters, DIAGNOSTICS_PERIOD_STEPS
-from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures
+from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures, raw_publish
 
 MICRO_ROLE = 1
 MACRO_ROLE = 2
@@ -75,9 +75,19 @@ class ScaleNode(Node):
         else:
             self._connect_timer = self.create_timer(CONNECT_PERIOD, self._connect)
 
+    def open_exchange(self, out_topic: str, in_topic: str, on_in) -> None:
+        """Split layout, coupled cell: publish this node's hand-over bytes on ``out_topic``
+        and take the other scale node's from ``in_topic`` with ``on_in`` (raw bytes)."""
+        self.exchange_pub = self.create_publisher(UInt8MultiArray, out_topic, COUPLING_QOS)
+        self.send_exchange = raw_publish(self.exchange_pub, self.get_logger())
+        self._exchange_sub = self.create_subscription(UInt8MultiArray, in_topic, on_in,
+                                                      COUPLING_QOS, raw=True)
+
     def peers_matched(self) -> bool:
-        """Return True once the exchange with the other scale node (if any) is matched."""
-        return True
+        """Return True once the exchange with the other scale node (if any) is matched both
+        ways: our writer sees its reader, our reader sees its writer."""
+        return self.exchange_pub is None or (self.exchange_pub.get_subscription_count() >= 1
+                                             and self._exchange_sub.get_publisher_count() >= 1)
 
     def _connect(self) -> None:
         if self._connect_timer.is_canceled() or not self.peers_matched():
@@ -98,10 +108,18 @@ class ScaleNode(Node):
         return b''
 
     def advance_remote(self, inp: StepInput) -> None:
-        """Advance the stage with the coordinator's step input, then :meth:`finish_step`
-        (nodes coupled to the other scale finish when its bytes have arrived)."""
+        """Advance the stage with the coordinator's step input, then :meth:`finish_step`;
+        with an exchange, keep the step pending and :meth:`exchange` (the node finishes it
+        when the other scale's bytes have arrived)."""
         self.stage.advance(inp)
-        self.finish_step(inp)
+        if self.exchange_pub is None:
+            self.finish_step(inp)
+            return
+        self._pending = inp
+        self.exchange(inp)
+
+    def exchange(self, inp: StepInput) -> None:
+        """Hand-over work of a pending step (coupled nodes override it)."""
 
     def finish_step(self, inp: StepInput) -> None:
         """Publish the step's streams and report the step done (with the stage's counters on
@@ -160,3 +178,5 @@ class ScaleNode(Node):
 
     _last_step = 0
     _done_matched = False
+    exchange_pub = None  # the hand-over exchange's writer (split layout, coupled cells)
+    _pending: Optional[StepInput] = None  # stepped, its hand-over not finished
