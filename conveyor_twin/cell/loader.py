@@ -344,6 +344,7 @@ def _zone(r: _Reader) -> Zone:
         to_micro_density=to_micro,
         min_dwell=a.number('min_dwell', 0.5, low=0.0),
         sensor_margin=a.number('sensor_margin', 0.1, low=0.0),
+        free_flow_slip=a.number('free_flow_slip', 0.0, low=0.0, high=1.0),
     )
     a.done()
     r.done()

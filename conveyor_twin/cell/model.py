@@ -245,6 +245,9 @@ class AutoSwitch:
     :param min_dwell: least time between two switches of a tile [s].
     :param sensor_margin: tiles within this distance of a light barrier or an actuator stay
         micro [m].
+    :param free_flow_slip: a micro tile whose parts slip against the local belt velocity by
+        less than this fraction of the belt speed on average is free flow and stays micro at
+        any density (exact transport between sensor windows); 0 turns the test off [1].
     """
 
     tile: float = 0.25
@@ -252,6 +255,7 @@ class AutoSwitch:
     to_micro_density: float = 1500.0
     min_dwell: float = 0.5
     sensor_margin: float = 0.1
+    free_flow_slip: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -418,7 +418,8 @@ class ScaleCoupling:
     def _switch(self, region: _Region, step: int) -> None:
         tiles = region.tiles
         v = self.micro.parts_view()
-        if not tiles.decide(step, v.x, v.y, self.micro.n, region.sim.density):
+        if not tiles.decide(step, v.x, v.y, v.vx, v.vy, self.micro.n, region.sim.density,
+                            region.sim.cell_velocity):
             return
         self._apply_tiles(region)
 

@@ -5,6 +5,14 @@ below ``to_micro_density`` [parts/m^2], at most once per ``min_dwell`` [s]; tile
 ``sensor_margin`` [m] of a light barrier or of any position of an actuator are sensor windows
 and stay micro, so discrete signals and actuator contacts stay exact. Micro tiles count part
 centres, macro tiles integrate the density; the density is over the tile's area in the zone.
+
+Free flow (``free_flow_slip`` > 0): a micro tile whose parts ride with the belt, i.e. whose mean
+slip ``min(1, |v - v_belt| / |v_belt|)`` (``v_belt`` the macro grid's velocity at the part's
+cell, sliding along obstacles included; 1 where the belt is slower than
+:data:`FREE_FLOW_MIN_SPEED`) is below ``free_flow_slip``, does not turn macro at any density.
+Parts on the belt without contacts keep their exact gaps from one sensor window to the next,
+which the macro transport would smear; a tile where a queue forms (parts slower than the belt)
+still turns macro. It costs micro steps for dense free flow, so it is off by default.
 """
 
 import math
@@ -18,6 +26,8 @@ from conveyor_twin.macro import grid as _grid
 
 # Steps between two evaluations of the tile densities.
 CHECK_STEPS = 10
+# Belt speeds below this [m/s] give no free flow (a part there slips by 1).
+FREE_FLOW_MIN_SPEED = 1e-3
 
 
 @njit(cache=True)
@@ -51,21 +61,46 @@ def mass_per_tile(rho: np.ndarray, h: float, tc: int, mass: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def decide_tiles(x: np.ndarray, y: np.ndarray, n: int, ox: float, oy: float, h: float,
-                 rho: np.ndarray, tc: int, counts: np.ndarray, mass: np.ndarray,
-                 area: np.ndarray, macro: np.ndarray, locked: np.ndarray,
-                 last_switch: np.ndarray, step: int, dwell: int, to_macro: float,
-                 to_micro: float) -> int:
+def slip_per_tile(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray, n: int,
+                  ox: float, oy: float, h: float, vcell: np.ndarray, tc: int,
+                  slip: np.ndarray) -> None:
+    """Sum the parts' slip ``min(1, |v - v_belt| / |v_belt|)`` per tile (``slip`` ``(nty,
+    ntx)``, cleared here; ``vcell`` ``(ny, nx, 2)`` the cell-centre belt velocity [m/s])."""
+    slip[:, :] = 0.0
+    ny, nx = vcell.shape[0], vcell.shape[1]
+    for k in range(n):
+        fx = (x[k] - ox) / h
+        fy = (y[k] - oy) / h
+        if fx < 0.0 or fy < 0.0 or fx >= nx or fy >= ny:
+            continue
+        i, j = int(fx), int(fy)
+        bx, by = vcell[j, i, 0], vcell[j, i, 1]
+        speed = math.sqrt(bx * bx + by * by)
+        s = 1.0
+        if speed > FREE_FLOW_MIN_SPEED:
+            s = min(1.0, math.sqrt((vx[k] - bx) ** 2 + (vy[k] - by) ** 2) / speed)
+        slip[j // tc, i // tc] += s
+
+
+@njit(cache=True)
+def decide_tiles(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray, n: int,
+                 ox: float, oy: float, h: float, rho: np.ndarray, vcell: np.ndarray, tc: int,
+                 counts: np.ndarray, mass: np.ndarray, slip: np.ndarray, area: np.ndarray,
+                 macro: np.ndarray, locked: np.ndarray, last_switch: np.ndarray, step: int,
+                 dwell: int, to_macro: float, to_micro: float, free_flow_slip: float) -> int:
     """Switch the tiles whose density crossed a threshold; return how many switched.
 
     Tile density [parts/m^2]: the integrated ``rho`` of macro tiles, the micro part centres
     of the others, over ``area`` [m^2]. A micro tile that is not ``locked`` turns macro above
-    ``to_macro``, a macro tile turns micro below ``to_micro`` or when locked, each at least
-    ``dwell`` steps after its last switch (``last_switch``, updated).
+    ``to_macro`` unless it is free flow (mean slip below ``free_flow_slip``, see the module
+    docstring; 0: never), a macro tile turns micro below ``to_micro`` or when locked, each at
+    least ``dwell`` steps after its last switch (``last_switch``, updated).
     """
     ny, nx = rho.shape
     count_micro(x, y, n, ox, oy, h, nx, ny, tc, counts)
     mass_per_tile(rho, h, tc, mass)
+    if free_flow_slip > 0.0:
+        slip_per_tile(x, y, vx, vy, n, ox, oy, h, vcell, tc, slip)
     nty, ntx = macro.shape
     switched = 0
     for ty in range(nty):
@@ -77,7 +112,9 @@ def decide_tiles(x: np.ndarray, y: np.ndarray, n: int, ox: float, oy: float, h: 
                     macro[ty, tx] = False
                     last_switch[ty, tx] = step
                     switched += 1
-            elif not locked[ty, tx] and counts[ty, tx] / area[ty, tx] > to_macro:
+            elif (not locked[ty, tx] and counts[ty, tx] / area[ty, tx] > to_macro
+                  and not (free_flow_slip > 0.0
+                           and slip[ty, tx] < free_flow_slip * counts[ty, tx])):
                 macro[ty, tx] = True
                 last_switch[ty, tx] = step
                 switched += 1
@@ -161,6 +198,7 @@ class AutoTiles:
         self.dwell_steps = int(round(p.min_dwell / cell.settings.step))
         self.counts = np.zeros((self.nty, self.ntx))
         self.mass = np.zeros((self.nty, self.ntx))
+        self.slip = np.zeros((self.nty, self.ntx))
         self.switches = 0
 
     def cell_mask(self) -> np.ndarray:
@@ -169,15 +207,17 @@ class AutoTiles:
         fill_cell_mask(self.macro, self.tc, active)
         return active
 
-    def decide(self, step: int, x: np.ndarray, y: np.ndarray, n: int,
-               rho: np.ndarray) -> bool:
-        """Update the tile modes from the densities; return True if any tile switched."""
+    def decide(self, step: int, x: np.ndarray, y: np.ndarray, vx: np.ndarray,
+               vy: np.ndarray, n: int, rho: np.ndarray, vcell: np.ndarray) -> bool:
+        """Update the tile modes from the densities (and the parts' slip against the belt
+        velocity ``vcell`` [m/s], ``(ny, nx, 2)``); return True if any tile switched."""
         g = self.grid
         p = self.params
-        switched = decide_tiles(x, y, n, g.origin_x, g.origin_y, g.h, rho, self.tc,
-                                self.counts, self.mass, self.area, self.macro, self.locked,
-                                self.last_switch, step, self.dwell_steps,
-                                float(p.to_macro_density), float(p.to_micro_density))
+        switched = decide_tiles(x, y, vx, vy, n, g.origin_x, g.origin_y, g.h, rho, vcell,
+                                self.tc, self.counts, self.mass, self.slip, self.area,
+                                self.macro, self.locked, self.last_switch, step,
+                                self.dwell_steps, float(p.to_macro_density),
+                                float(p.to_micro_density), float(p.free_flow_slip))
         self.switches += switched
         return switched > 0
 

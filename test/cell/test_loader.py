@@ -115,6 +115,7 @@ def test_unknown_part_type_in_source(tmp_path: Path, default_doc: dict) -> None:
     (lambda d: d['actuators'][0].update(axis=[0.0, 0.0]), 'actuators[0].axis'),
     (lambda d: d['light_barriers'].append(dict(d['light_barriers'][0])), 'light_barriers[3].name'),
     (lambda d: d['zones'][0].update(policy='meso'), 'zones[0].policy'),
+    (lambda d: d['zones'][0].update(auto={'free_flow_slip': 1.5}), 'zones[0].auto.free_flow_slip'),
     (lambda d: d['macro'].update(cfl=1.5), 'macro.cfl'),
     (lambda d: d['micro'].update(capacity=0), 'micro.capacity'),
     (lambda d: d['micro'].update(capacity=True), 'micro.capacity'),

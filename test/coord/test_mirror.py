@@ -14,7 +14,7 @@ from conveyor_twin.coord.scale import ScaleCoupling
 from conveyor_twin.coord.stages import MacroStage, MicroStage
 from conveyor_twin.coord.twin import Twin
 from conveyor_twin.micro.sim import MicroSim
-from test.scale.test_validation import _deflector_cell
+from test.scale.deflector_scenario import deflector_cell
 
 COMPARE_EVERY = 250
 
@@ -115,7 +115,7 @@ def test_state_bytes_round_trip_into_a_mirror() -> None:
 def test_auto_zone_with_jam_and_tile_switches_is_bit_identical_split() -> None:
     # (a) the deflector jam on the default cell (auto zone, 500 parts/s): tiles turn macro as
     # the jam grows and parts are released from the density; compared every 250 steps
-    cell = _deflector_cell('auto')
+    cell = deflector_cell('auto')
     assert has_coupling(cell)
     pair = Pair(cell)
     pair.run(7000)

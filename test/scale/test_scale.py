@@ -10,6 +10,7 @@ import yaml
 from conveyor_twin.cell.loader import cell_from_mapping, default_cell_text
 from conveyor_twin.coord.scale import RELEASE_SPREAD, ScaleCoupling
 from conveyor_twin.coord.stages import MacroStage, MicroStage
+from conveyor_twin.coord.tiles import slip_per_tile
 from conveyor_twin.coord.twin import Twin
 
 
@@ -157,6 +158,42 @@ def test_auto_tiles_switch_with_hysteresis_and_dwell() -> None:
     twin.step(3000)
     assert tiles.switches > switches
     assert not tiles.macro.all()
+    assert coupling.max_residual <= 1e-9
+
+
+def test_slip_per_tile_measures_parts_against_the_local_belt_velocity() -> None:
+    # one tile of 2 x 2 cells of 0.1 m; belt 0.5 m/s along x, no belt in the right column
+    vcell = np.zeros((2, 2, 2))
+    vcell[:, 0, 0] = 0.5
+    x = np.array([0.05, 0.05, 0.05, 0.15, 0.05])
+    y = np.array([0.05, 0.15, 0.05, 0.05, 0.15])
+    vx = np.array([0.5, 0.0, 0.25, 0.0, 2.0])   # riding, at rest, half, off the belt, fast
+    vy = np.zeros(5)
+    slip = np.zeros((1, 1))
+    slip_per_tile(x, y, vx, vy, 5, 0.0, 0.0, 0.1, vcell, 2, slip)
+    assert slip[0, 0] == pytest.approx(0.0 + 1.0 + 0.5 + 1.0 + 1.0)
+
+
+def test_free_flow_stays_micro_and_a_queue_still_goes_macro() -> None:
+    # 600 parts/s on the 0.5 m belt at 0.5 m/s: 2400 parts/m^2 of free flow, above the
+    # to-macro density. Without the free-flow test the feed goes macro; with it the feed stays
+    # micro until the closed stopper (x = 1.2) makes a queue, which goes macro.
+    def run(slip: float):
+        cell = _cell(_auto_zone(to_macro_density=2000.0, to_micro_density=800.0,
+                                min_dwell=0.2, free_flow_slip=slip), rate=600.0)
+        twin, micro, macro, coupling = _twin(cell)
+        tiles = coupling.regions[0].tiles
+        twin.step(2500)
+        free = tiles.macro.copy()
+        twin.commands.submit_actuator('stopper', 0.008)
+        twin.step(3000)
+        return free, tiles, coupling
+    free, _, _ = run(0.0)
+    assert free.any()
+    free, tiles, coupling = run(0.1)
+    assert not free.any()
+    xc = coupling.regions[0].sim.origin_x + (np.arange(tiles.ntx) + 0.5) * tiles.tc * 0.02
+    assert tiles.macro.any() and (xc[tiles.macro.any(axis=0)] < 1.2).all()
     assert coupling.max_residual <= 1e-9
 
 

@@ -8,7 +8,7 @@ covers the whole belt).
 """
 
 import math
-from typing import Dict, List
+from typing import List
 
 import numpy as np
 import pytest
@@ -18,92 +18,45 @@ from conveyor_twin.cell.loader import cell_from_mapping, default_cell_text
 from conveyor_twin.coord.stages import MacroStage, MicroStage
 from conveyor_twin.coord.twin import Twin
 
-# The jam in front of the deflector: 2400 parts at 500 parts/s (seed 1).
-DEFLECTOR_BOX = (2.2, -0.25, 3.1, 0.25)  # upstream of the deflector's gap end (x = 3.1)
-SAMPLE_STEPS = 500
-DEFLECTOR_STEPS = 20000
-# Collision-operator speed of the multi-scale run [m/s]: the Goettlich model's one free
-# parameter, chosen so the macro jam passes the deflector gap at the micro jam's mean rate
-# (the default cell carries the same value; see docs/cell_format.md, macro).
-DEFLECTOR_EPSILON = 0.8
+from .deflector_scenario import deflector_run, exit_time, mean_exit_time, PARTS
+
+pytestmark = pytest.mark.slow
+
+# Seeds of the ensembles compared (the jam's discharge is chaotic per seed at both scales: a
+# single seed's queue differs by up to 5 % between two pure micro runs perturbed in the 12th
+# digit, docs/scale_validation.md).
+SEEDS = (1, 2, 3, 4)
+# Collision-operator speed [m/s] of the default cell: the Goettlich model's one free parameter,
+# chosen so the macro jam queues and discharges as the micro one (seeds 1..8 in
+# docs/scale_validation.md: queue mean -2.2 %, peak -2.9 %, mean exit time -0.3 %).
+DEFLECTOR_EPSILON = 1.2
 
 
-def _deflector_cell(policy: str):
-    d = yaml.safe_load(default_cell_text())
-    d['sources'][0]['rate'] = 500.0
-    d['sources'][0]['max_parts'] = 2400
-    d['macro']['epsilon'] = DEFLECTOR_EPSILON
-    d['zones'] = [{'name': 'belt', 'policy': policy, 'region': [0.0, -0.25, 6.0, 0.25],
-                   'resolution': 0.02,
-                   'auto': {'tile': 0.2, 'to_macro_density': 3000.0,
-                            'to_micro_density': 1000.0, 'min_dwell': 0.2,
-                            'sensor_margin': 0.05}}]
-    return cell_from_mapping(d)
+def _ensemble(policy: str, quantity) -> float:
+    return float(np.mean([quantity(deflector_run(policy, seed)) for seed in SEEDS]))
 
 
-def _run_deflector(policy: str) -> Dict[str, np.ndarray]:
-    cell = _deflector_cell(policy)
-    micro, macro = MicroStage(cell, 1), MacroStage(cell)
-    twin = Twin(cell, seed=1, stages=[micro, macro])
-    coupling = twin.stages[-1]
-    coupling.check = True  # the ledger is checked every step (BalanceError otherwise)
-    queue: List[float] = []
-    left: List[float] = []
-    for _ in range(DEFLECTOR_STEPS // SAMPLE_STEPS):
-        twin.step(SAMPLE_STEPS)
-        v = micro.sim.parts_view()
-        x0, y0, x1, y1 = DEFLECTOR_BOX
-        q = float(((v.x >= x0) & (v.x < x1) & (v.y >= y0) & (v.y < y1)).sum())
-        out = float(micro.sim.left[0])
-        if coupling.enabled:
-            q += macro.grids[0].region_parts(DEFLECTOR_BOX)
-            out += coupling.left_macro
-        queue.append(q)
-        left.append(out)
-    return {'queue': np.array(queue), 'left': np.array(left),
-            'edges': micro.barrier_edge_count().copy(),
-            'switches': coupling.regions[0].tiles.switches if coupling.enabled else 0,
-            'residual': coupling.max_residual if coupling.enabled else 0.0}
-
-
-@pytest.fixture(scope='module')
-def deflector_runs() -> Dict[str, Dict[str, np.ndarray]]:
-    return {'micro': _run_deflector('micro'), 'multi': _run_deflector('auto')}
-
-
-def test_deflector_queue_agrees_between_pure_micro_and_multi_scale(deflector_runs) -> None:
-    micro, multi = deflector_runs['micro'], deflector_runs['multi']
-    assert multi['switches'] > 0 and multi['residual'] <= 1e-9
-    assert micro['queue'].max() > 1000  # a real jam: over 1000 of the 2400 parts queue
+def test_deflector_queue_agrees_between_pure_micro_and_multi_scale() -> None:
+    for seed in SEEDS:
+        micro, multi = deflector_run('micro', seed), deflector_run('auto', seed)
+        assert multi['switches'] > 0 and multi['residual'] <= 1e-9
+        assert micro['queue'].max() > 1000  # a real jam: over 1000 of the 2400 parts queue
     # peak queue and time-mean queue (the mean waiting, Little's law) within 5 %
-    assert multi['queue'].max() == pytest.approx(micro['queue'].max(), rel=0.05)
-    assert multi['queue'].mean() == pytest.approx(micro['queue'].mean(), rel=0.05)
+    for quantity in (lambda r: r['queue'].max(), lambda r: r['queue'].mean()):
+        assert _ensemble('auto', quantity) == pytest.approx(_ensemble('micro', quantity),
+                                                            rel=0.05)
 
 
-def test_exit_throughput_agrees_between_pure_micro_and_multi_scale(deflector_runs) -> None:
-    micro, multi = deflector_runs['micro'], deflector_runs['multi']
-    # every part leaves through the exit at both scales (multi-scale: but a few thousandths
-    # of a part of density still spread on the belt, on its way to the exit sink)
-    assert micro['left'][-1] == 2400
-    assert multi['left'][-1] == pytest.approx(2400, abs=0.01)
-
-    def exit_time(left: np.ndarray, fraction: float) -> float:
-        k = int(np.argmax(left >= fraction * 2400))
-        return (k + 1) * SAMPLE_STEPS * 1e-3
-
+def test_exit_throughput_agrees_between_pure_micro_and_multi_scale() -> None:
+    for seed in SEEDS:
+        # every part leaves through the exit at both scales (multi-scale: but a few
+        # thousandths of a part of density still spread on the belt, on its way to the sink)
+        assert deflector_run('micro', seed)['left'][-1] == PARTS
+        assert deflector_run('auto', seed)['left'][-1] == pytest.approx(PARTS, abs=0.01)
     # the mean exit time (integral of the parts not yet out) and the median within 5 %
-    mean_exit = [float((2400 - r['left']).sum()) * SAMPLE_STEPS * 1e-3 / 2400
-                 for r in (micro, multi)]
-    assert mean_exit[1] == pytest.approx(mean_exit[0], rel=0.05)
-    assert exit_time(multi['left'], 0.5) == pytest.approx(exit_time(micro['left'], 0.5),
-                                                          rel=0.05)
-
-
-def test_barrier_upstream_of_the_jam_counts_identical_edges(deflector_runs) -> None:
-    # lb_infeed (x = 2.0) sits in a sensor window upstream of every macro tile: the parts it
-    # sees never went through the macro scale, so its edges are the pure micro ones.
-    assert deflector_runs['multi']['edges'][0] == deflector_runs['micro']['edges'][0]
-    assert deflector_runs['micro']['edges'][0] > 0
+    for quantity in (lambda r: mean_exit_time(r['left']), lambda r: exit_time(r['left'], 0.5)):
+        assert _ensemble('auto', quantity) == pytest.approx(_ensemble('micro', quantity),
+                                                            rel=0.05)
 
 
 def _stopper_run(policy: str) -> List[float]:
