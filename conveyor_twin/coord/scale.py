@@ -13,9 +13,13 @@ cell mask (all cells for ``macro``; the cells of macro tiles for ``auto``). Each
    inactive cells (micro tiles) of an ``auto`` zone stays in the density there and keeps
    flowing with the belt field, except that it is held back upstream where the micro parts of
    a cell leave no room (``rho_max h^2`` minus the part centres in it: the macro solver does
-   not see micro parts, so without this it would pile onto a micro jam). Wherever a window of
-   ``2 w + 1`` neighbouring cells / faces (``w`` cells cover a part's radius) holds a whole
-   part, one part is placed at the window's mass centre (outside the grid for faces) with the
+   not see micro parts, so without this it would pile onto a micro jam), and held back in
+   front of sensor windows, whose cells take no density: every part that reaches a light
+   barrier or an actuator there is a micro part (thin fronts are gathered, remainders with
+   nothing behind them let past: :func:`~conveyor_twin.coord.handover.gather_fronts`; density
+   coming straight from a macro tile is released in the window's entrance cells). Wherever a
+   window of ``2 w + 1`` neighbouring cells / faces (``w`` cells cover a part's radius) holds
+   a whole part, one part is placed at the window's mass centre (outside the grid for faces) with the
    local belt velocity, without overlap: a lattice of part-diameter offsets over the whole
    window is tried, downstream along the local flow first, never onto an active cell (so it
    is not captured again); if all overlap, it waits. One part is taken from the window, the
@@ -93,11 +97,16 @@ class _Region:
         self.sim = sim
         g = sim.grid
         self.tiles: Optional[AutoTiles] = None
+        # cells of sensor windows: no density flows into them (see handover.hold_back)
+        self.closed = np.zeros((g.ny, g.nx), dtype=np.uint8)
         if sim.zone.policy == 'auto':
             self.tiles = AutoTiles(cell, sim.zone, g)
             self.active = self.tiles.cell_mask()
+            _fill_cell_mask(self.tiles.locked, self.tiles.tc, self.closed)
         else:
             self.active = np.ones((g.ny, g.nx), dtype=np.uint8)
+        scratch = np.zeros((g.ny * g.nx, 2), dtype=np.int64)
+        self.border = scratch[:_ho.border_cells(self.closed, scratch)].copy()
         self.face_ranges = [np.array([[0, g.ny, 0, 1]]), np.array([[0, g.ny, 0, 1]]),
                             np.array([[0, 1, 0, g.nx]]), np.array([[0, 1, 0, g.nx]])]
         # scratch of the micro-tile blocks (one per tile at most) and the inactive row runs
@@ -367,9 +376,13 @@ class ScaleCoupling:
         """Keep the density in micro tiles within the room the micro parts leave."""
         sim, g = region.sim, region.sim.grid
         v = self.micro.state.P
-        _ho.hold_back_runs(sim.density, region._runs, region.n_runs, sim.solid,
+        _ho.hold_back_runs(sim.density, region._runs, region.n_runs, region.active, sim.solid,
                            sim.cell_velocity, g.origin_x, g.origin_y, g.h, sim.rho_max, v[0],
-                           v[1], self.micro.n, region.occ)
+                           v[1], self.micro.n, region.occ, region.closed)
+        if region.border.shape[0]:
+            _ho.gather_fronts(sim.density, region.active, region.closed, sim.solid,
+                              sim.cell_velocity, g.h, region.border, region.w, region._runs,
+                              region.n_runs)
 
     def _release(self, region: _Region) -> None:
         g = region.sim.grid

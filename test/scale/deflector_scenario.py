@@ -57,8 +57,9 @@ def deflector_cell(policy: str, perturbation: str = ''):
 @functools.lru_cache(maxsize=None)
 def deflector_run(policy: str, seed: int, perturbation: str = '') -> Dict[str, object]:
     """Run the scenario; return ``edges`` (barrier, blocked, time [ns]) in order, ``counts``
-    per barrier, ``queue`` and ``left`` [parts] every 0.1 s, the tile ``switches`` and the
-    largest ledger residual (the ledger is checked every step: BalanceError otherwise)."""
+    per barrier, ``queue`` and ``left`` [parts] every 0.1 s, the tile ``switches``, the
+    largest ledger residual (the ledger is checked every step: BalanceError otherwise) and the
+    largest density [parts/m^2, summed over cells] seen in sensor-window cells."""
     cell = deflector_cell(policy, perturbation)
     micro, macro = MicroStage(cell, seed), MacroStage(cell)
     twin = Twin(cell, seed=seed, stages=[micro, macro])
@@ -67,6 +68,7 @@ def deflector_run(policy: str, seed: int, perturbation: str = '') -> Dict[str, o
     edges: List[Tuple[int, bool, int]] = []
     queue: List[float] = []
     left: List[float] = []
+    window_mass = 0.0
     x0, y0, x1, y1 = DEFLECTOR_BOX
     for k in range(STEPS):
         twin.step(1)
@@ -79,12 +81,16 @@ def deflector_run(policy: str, seed: int, perturbation: str = '') -> Dict[str, o
             if coupling.enabled:
                 q += macro.grids[0].region_parts(DEFLECTOR_BOX)
                 out += coupling.left_macro
+                region = coupling.regions[0]
+                in_windows = float(region.sim.density[region.closed == 1].sum())
+                window_mass = max(window_mass, in_windows)
             queue.append(q)
             left.append(out)
     return {'edges': edges, 'counts': micro.barrier_edge_count().astype(int).tolist(),
             'queue': np.array(queue), 'left': np.array(left),
             'switches': coupling.regions[0].tiles.switches if coupling.enabled else 0,
-            'residual': coupling.max_residual if coupling.enabled else 0.0}
+            'residual': coupling.max_residual if coupling.enabled else 0.0,
+            'window_mass': window_mass}
 
 
 def barrier_edges(run: Dict[str, object], index: int) -> List[Tuple[bool, int]]:
