@@ -131,21 +131,32 @@ def deposit_disc(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, ox: flo
 
 
 @njit(cache=True)
+def upstream_of(vel: np.ndarray, j: int, i: int):
+    """Return the upstream neighbour ``(jj, ii)`` of cell ``(j, i)`` against the dominant
+    component of the cell velocity ``vel[j, i]`` [m/s]; ``(-1, -1)`` at rest or off the
+    grid."""
+    ny, nx = vel.shape[0], vel.shape[1]
+    vx = vel[j, i, 0]
+    vy = vel[j, i, 1]
+    if vx == 0.0 and vy == 0.0:
+        return -1, -1
+    if abs(vx) >= abs(vy):
+        jj, ii = j, i - (1 if vx > 0.0 else -1)
+    else:
+        jj, ii = j - (1 if vy > 0.0 else -1), i
+    if jj < 0 or ii < 0 or jj >= ny or ii >= nx:
+        return -1, -1
+    return jj, ii
+
+
+@njit(cache=True)
 def push_upstream(rho: np.ndarray, solid: np.ndarray, vel: np.ndarray, j: int, i: int,
                   excess: float) -> None:
     """Move ``excess`` [parts/m^2] of cell ``(j, i)`` to its upstream neighbour along the
     dominant component of the cell velocity ``vel[j, i]`` (nothing if the velocity is zero or
     that neighbour is outside the grid or solid)."""
-    ny, nx = rho.shape
-    vx = vel[j, i, 0]
-    vy = vel[j, i, 1]
-    if vx == 0.0 and vy == 0.0:
-        return
-    if abs(vx) >= abs(vy):
-        jj, ii = j, i - (1 if vx > 0.0 else -1)
-    else:
-        jj, ii = j - (1 if vy > 0.0 else -1), i
-    if jj < 0 or ii < 0 or jj >= ny or ii >= nx or solid[jj, ii]:
+    jj, ii = upstream_of(vel, j, i)
+    if jj < 0 or solid[jj, ii]:
         return
     rho[j, i] -= excess
     rho[jj, ii] += excess
@@ -158,16 +169,8 @@ def push_out_of_window(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, v
     (see :func:`push_upstream`), unless that neighbour is active (macro): density that flows
     straight from a macro tile into a window stays in the window's entrance cells and is
     released there, as at any macro -> micro boundary."""
-    ny, nx = rho.shape
-    vx = vel[j, i, 0]
-    vy = vel[j, i, 1]
-    if vx == 0.0 and vy == 0.0:
-        return
-    if abs(vx) >= abs(vy):
-        jj, ii = j, i - (1 if vx > 0.0 else -1)
-    else:
-        jj, ii = j - (1 if vy > 0.0 else -1), i
-    if jj < 0 or ii < 0 or jj >= ny or ii >= nx or solid[jj, ii] or active[jj, ii]:
+    jj, ii = upstream_of(vel, j, i)
+    if jj < 0 or solid[jj, ii] or active[jj, ii]:
         return
     rho[jj, ii] += rho[j, i]
     rho[j, i] = 0.0
@@ -241,18 +244,10 @@ def _is_front(active: np.ndarray, closed: np.ndarray, solid: np.ndarray, vel: np
 def _upstream_mass(rho: np.ndarray, active: np.ndarray, solid: np.ndarray, vel: np.ndarray,
                    j: int, i: int, cells: int) -> float:
     """Mass [parts / h^2] in up to ``cells`` open inactive cells upstream of ``(j, i)``."""
-    ny, nx = rho.shape
     total = 0.0
     for _ in range(cells):
-        vx = vel[j, i, 0]
-        vy = vel[j, i, 1]
-        if vx == 0.0 and vy == 0.0:
-            break
-        if abs(vx) >= abs(vy):
-            i = i - (1 if vx > 0.0 else -1)
-        else:
-            j = j - (1 if vy > 0.0 else -1)
-        if j < 0 or i < 0 or j >= ny or i >= nx or solid[j, i] or active[j, i]:
+        j, i = upstream_of(vel, j, i)
+        if j < 0 or solid[j, i] or active[j, i]:
             break
         total += rho[j, i]
     return total
