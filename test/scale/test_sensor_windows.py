@@ -23,7 +23,7 @@ through the deflector gap. Method and measurements: docs/scale_validation.md. In
   the window upstream of it.
 
 Cost: 6 pure micro runs (~6 s each) and 4 multi-scale runs (~11 s each), shared with
-test_validation.py.
+test_validation.py (which runs seeds 1..8).
 """
 
 import numpy as np
@@ -101,7 +101,8 @@ def test_downstream_counts_agree_with_pure_micro_statistically(barrier) -> None:
 
 def test_exit_plateau_rate_within_pure_micro_spread() -> None:
     """The jam's discharge: the exit rate while 10..90 % of the parts leave, every multi-scale
-    run within pure micro's range (seeds and perturbations) widened by 5 %."""
+    run within pure micro's range (seeds and perturbations) widened by 10 % (measured: 427..468
+    against 446..492 parts/s over seeds 1..8; the macro jam of epsilon 0.8 gave 384..409)."""
     micro = [plateau_rate(r['left']) for r in _micro_runs()]
     multi = [plateau_rate(r['left']) for r in _multi_runs()]
-    assert min(micro) * 0.95 <= min(multi) and max(multi) <= max(micro) * 1.05
+    assert min(micro) * 0.9 <= min(multi) and max(multi) <= max(micro) * 1.1
