@@ -33,7 +33,7 @@ setup(
             'conveyor-twin = conveyor_twin.cli:main',
             'micro_simulator = conveyor_twin.ros.micro_node:main',
             'macro_simulator = conveyor_twin.ros.macro_node:main',
-            'scale_coordinator = conveyor_twin.ros.coordinator_node:main',
+            'scale_coordinator = conveyor_twin.ros.split:coordinator_main',
         ],
     },
 )

@@ -32,8 +32,7 @@ from typing import Dict, List
 import numpy as np
 
 from conveyor_twin.cell.loader import cell_from_mapping
-from conveyor_twin.coord.stages import MacroStage, MicroStage
-from conveyor_twin.coord.twin import Twin
+from conveyor_twin.coord.assembly import build_twin
 
 DEFAULT_MICRO = '1000,5000,20000'
 DEFAULT_MULTI = '1000,5000,20000,100000'
@@ -89,9 +88,8 @@ def run_case(n: int, policy: str, steps: int, warmup: int) -> Dict[str, float]:
     pos = lattice(n)
     length = max(30.0, float(pos[-1, 0]) + 2.0)
     cell = scene(length, policy, capacity=max(2 * n, 2000) if policy == 'micro' else 30000)
-    micro, macro = MicroStage(cell, 1), MacroStage(cell)
-    twin = Twin(cell, seed=1, stages=[micro, macro])
-    coupling = twin.stages[-1]
+    built = build_twin(cell, seed=1)
+    twin, micro, coupling = built.twin, built.micro, built.coupling
     if policy == 'micro':
         micro.sim.spawn(0, pos[:, 0], pos[:, 1], 0.0, SPEED, 0.0)
     else:

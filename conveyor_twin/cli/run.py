@@ -8,6 +8,7 @@ import argparse
 import json
 import os
 import signal
+import subprocess
 import sys
 import time
 from typing import List
@@ -138,6 +139,61 @@ def run_composed(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_split(args: argparse.Namespace) -> int:
+    """Start the three node processes, wait for the coordinator, print its summary."""
+    from conveyor_twin.ros.split import ros_args, SUMMARY_PREFIX
+
+    cell_file = os.path.abspath(args.cell) if args.cell else ''
+    try:
+        load_cell(cell_file or None)
+    except CellError as exc:
+        print(f'invalid cell: {exc}', file=sys.stderr)
+        return 1
+    process_args = ros_args(cell_file, args.seed, args.mode, args.duration, args.namespace,
+                            args.markers_rate)
+    env = dict(os.environ)
+    modules = ['conveyor_twin.ros.micro_node', 'conveyor_twin.ros.macro_node']
+    scales = [subprocess.Popen([sys.executable, '-m', m] + process_args, env=env)
+              for m in modules]
+    coordinator = subprocess.Popen(
+        [sys.executable, '-m', 'conveyor_twin.ros.split'] + process_args, env=env,
+        stdout=subprocess.PIPE, text=True)
+    summary = None
+
+    def read_until_eof() -> None:
+        nonlocal summary
+        for line in coordinator.stdout:
+            if line.startswith(SUMMARY_PREFIX):
+                summary = json.loads(line[len(SUMMARY_PREFIX):])
+            elif not args.quiet:
+                print(line, end='', file=sys.stderr)
+
+    try:
+        try:
+            read_until_eof()
+        except KeyboardInterrupt:
+            # the coordinator stops on SIGINT and prints its summary: keep reading it
+            coordinator.send_signal(signal.SIGINT)
+            read_until_eof()
+        code = coordinator.wait(30)
+    finally:
+        for proc in scales:
+            proc.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + 10.0
+        for proc in scales:
+            try:
+                proc.wait(max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+    if summary is None:
+        print('the coordinator process ended without a summary', file=sys.stderr)
+        return code or 1
+    summary['layout'] = 'split'
+    _print_summary(summary, args.json)
+    return code
+
+
 def main(argv: List[str]) -> int:
     """Entry point of ``conveyor-twin run``."""
     args = build_parser().parse_args(argv)
@@ -147,6 +203,5 @@ def main(argv: List[str]) -> int:
               file=sys.stderr)
         return 2
     if args.split:
-        from conveyor_twin.ros.split import run_split
         return run_split(args)
     return run_composed(args)

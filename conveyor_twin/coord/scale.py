@@ -1,6 +1,8 @@
 """Scale coordination: micro and macro zones, exact hand-over, ``auto`` switching, the ledger.
 
-:class:`ScaleCoupling` is a stage stepped after the micro and macro stages. The micro simulator
+:class:`ScaleCoupling` is a stage stepped after the micro and macro stages (the assembly,
+:mod:`conveyor_twin.coord.assembly`, builds it with both and the light barriers of ``macro``
+zones it advances). The micro simulator
 covers the whole cell; every macro grid (zones of policy ``macro`` or ``auto``) has an ``active``
 cell mask (all cells for ``macro``; the cells of macro tiles for ``auto``). Each step:
 
@@ -64,6 +66,7 @@ from conveyor_twin.coord.macro_barriers import MacroBarrier
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.tiles import AutoTiles, CHECK_STEPS
 from conveyor_twin.coord.tiles import fill_cell_mask as _fill_cell_mask
+from conveyor_twin.coord.zone_barriers import MacroZoneBarriers
 from conveyor_twin.macro.solver import MacroSim
 from conveyor_twin.micro.sim import MicroSim
 
@@ -233,15 +236,22 @@ class _Region:
 class ScaleCoupling:
     """Hand-over between the micro stage and the macro stage's grids (a :class:`Stage`).
 
-    :param micro_stage: the :class:`~conveyor_twin.coord.stages.MicroStage`.
+    :param micro_stage: the :class:`~conveyor_twin.coord.stages.MicroStage` (or a mirror of
+        it: anything with the micro simulator as ``sim``).
     :param macro_stage: the :class:`~conveyor_twin.coord.stages.MacroStage`.
+    :param barriers: the light barriers of ``macro`` zones this coupling binds to the grids and
+        advances after each hand-over (the micro stage publishes them); None: a holder of its
+        own.
     :param check: check the ledger every step (raise :class:`BalanceError`); None reads
         the environment variable ``CONVEYOR_TWIN_CHECK_BALANCE``.
     """
 
-    def __init__(self, micro_stage, macro_stage, *, check: Optional[bool] = None) -> None:
+    def __init__(self, micro_stage, macro_stage, *,
+                 barriers: Optional[MacroZoneBarriers] = None,
+                 check: Optional[bool] = None) -> None:
         self.micro_stage = micro_stage
         self.macro_stage = macro_stage
+        self.zone_barriers = barriers if barriers is not None else MacroZoneBarriers()
         if check is None:
             check = os.environ.get(CHECK_ENV, '') not in ('', '0')
         self.check = bool(check)
@@ -276,17 +286,7 @@ class ScaleCoupling:
                                          for p in cell.part_types])
         self._cand = np.zeros(5)
         self._tries = MAX_FAILED_PLACEMENTS
-        self.barriers: List[MacroBarrier] = []
-        for index, barrier in enumerate(cell.light_barriers):
-            for region in self.regions:
-                if region.tiles is None and _inside(barrier, region.sim):
-                    self.barriers.append(MacroBarrier(index, barrier, region.sim,
-                                                      cell.part_types[0].bounding_radius))
-                    break
-        self.macro_barrier_index = np.array([b.index for b in self.barriers], dtype=np.int64)
-        self.macro_edges: List[Tuple[int, bool, float]] = []
-        self.macro_stage.coupling = self
-        self.micro_stage.coupling = self
+        self.zone_barriers.bind(cell, [r.sim for r in self.regions if r.tiles is None])
 
     def reset(self, cell: Cell, seed: int) -> None:
         """Rebind to the (reset) stages' new simulators."""
@@ -297,11 +297,26 @@ class ScaleCoupling:
         """True if the cell has macro grids to couple."""
         return bool(self.regions)
 
+    @property
+    def barriers(self) -> List[MacroBarrier]:
+        """The light barriers modelled on ``macro`` zones' grids."""
+        return self.zone_barriers.barriers
+
+    @property
+    def macro_edges(self) -> List[Tuple[int, bool, float]]:
+        """The last step's edges of :attr:`barriers`: (barrier index, blocked, time [s])."""
+        return self.zone_barriers.macro_edges
+
+    def balance_counters(self) -> Dict[str, float]:
+        """Return the ledger as counters (``balance_*``), empty without macro grids."""
+        if not self.enabled:
+            return {}
+        return {f'balance_{k}': v for k, v in self.ledger().items()}
+
     # --- stepping ---
     def advance(self, inp: StepInput) -> None:
         """Hand parts and mass over after the micro and macro steps of ``inp.step``."""
         self.step_index = inp.step
-        self.macro_edges = []
         if not self.regions:
             return
         self._tries = MAX_FAILED_PLACEMENTS
@@ -312,10 +327,7 @@ class ScaleCoupling:
             self._release(region)
             if region.tiles is not None and inp.step % CHECK_STEPS == 0:
                 self._switch(region, inp.step)
-        if self.barriers:
-            t_end = inp.time_ns * 1e-9
-            for barrier in self.barriers:
-                barrier.advance(self.cell.settings.step, t_end, self.macro_edges)
+        self.zone_barriers.advance(self.cell.settings.step, inp.time_ns * 1e-9)
         if self.check:
             self.check_balance()
 
@@ -549,10 +561,3 @@ def _lattice(half: float, d: float) -> np.ndarray:
     order = np.lexsort((pts[:, 1], pts[:, 0], np.hypot(pts[:, 0], pts[:, 1])))
     return np.ascontiguousarray(pts[order][:MAX_OFFSETS])
 
-
-def _inside(barrier, sim: MacroSim) -> bool:
-    g = sim.grid
-    x1, y1 = g.origin_x + g.nx * g.h, g.origin_y + g.ny * g.h
-    mx = 0.5 * (barrier.start[0] + barrier.end[0])
-    my = 0.5 * (barrier.start[1] + barrier.end[1])
-    return g.origin_x <= mx <= x1 and g.origin_y <= my <= y1

@@ -6,21 +6,20 @@ the coordinator's :class:`StepInput` (actual belt speeds and actuator positions 
 so both scales see the same actuation whatever the process layout.
 
 Scale hand-over: the micro scale simulates the whole cell; a
-:class:`~conveyor_twin.coord.scale.ScaleCoupling` stepped after both stages (the :class:`Twin`
-adds it when it steps both locally) moves parts and mass between them, and light barriers in
-``macro`` zones take their edges from the density (:mod:`conveyor_twin.coord.macro_barriers`).
-Split over processes, the coupling runs in the macro process on a mirror of the micro state, and
-the micro stage's ``coupling`` is a :class:`~conveyor_twin.coord.mirror.RemoteCoupling` carrying
-the same barrier values and edges (:mod:`conveyor_twin.coord.mirror`).
+:class:`~conveyor_twin.coord.scale.ScaleCoupling` stepped after both stages moves parts and mass
+between them, and light barriers in ``macro`` zones take their values and edges from the density
+(:mod:`conveyor_twin.coord.zone_barriers`): the micro stage is built with the holder of those
+values (:mod:`conveyor_twin.coord.assembly` wires both layouts).
 """
 
-from typing import Dict, List, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.clock import step_ns
 from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.coord.zone_barriers import BarrierOverlay
 from conveyor_twin.macro.solver import MacroSim
 from conveyor_twin.micro.errors import SpawnOverlapError
 from conveyor_twin.micro.sim import MicroSim
@@ -33,9 +32,13 @@ class MicroStage:
     """Micro scale of a cell: every part a rigid body.
 
     :param cell: the validated cell. :param seed: the run's seed.
+    :param macro_barriers: the values and edges of the light barriers in ``macro`` zones,
+        published in place of the micro ones (None: every barrier is micro).
     """
 
-    def __init__(self, cell: Cell, seed: int) -> None:
+    def __init__(self, cell: Cell, seed: int, *,
+                 macro_barriers: Optional[BarrierOverlay] = None) -> None:
+        self.macro_barriers = macro_barriers
         self.reset(cell, seed)
 
     def reset(self, cell: Cell, seed: int) -> None:
@@ -44,7 +47,6 @@ class MicroStage:
         self.sim = MicroSim(cell, seed=seed)
         self._dt_ns = step_ns(cell.settings.step)
         self._edges = _EMPTY_EDGES
-        self.coupling = None
 
     def advance(self, inp: StepInput) -> None:
         """Apply the step's actuation, advance one step, collect its barrier edges."""
@@ -66,7 +68,7 @@ class MicroStage:
         """Return ``micro_values`` (one per barrier) with the entries of barriers in macro
         zones replaced by their macro model's ``attribute`` (the array itself if there are
         none)."""
-        c = self.coupling
+        c = self.macro_barriers
         if c is None or not c.barriers:
             return micro_values
         out = micro_values.copy()
@@ -87,7 +89,7 @@ class MicroStage:
 
         Edges of barriers in macro zones come last, with part id 0.
         """
-        c = self.coupling
+        c = self.macro_barriers
         if c is None or not c.barriers:
             return self._edges
         ev = c.macro_edges
@@ -130,7 +132,6 @@ class MacroStage:
         self.cell = cell
         self.grids: List[MacroSim] = [MacroSim(cell, zone) for zone in cell.zones
                                       if zone.policy in ('macro', 'auto')]
-        self.coupling = None
         self.names = [g.zone.name for g in self.grids]
 
     def advance(self, inp: StepInput) -> None:
@@ -143,11 +144,9 @@ class MacroStage:
     def counters(self) -> Dict[str, float]:
         """Part balance over all grids: entered, left, in flight (fractional parts).
 
-        With a scale coupling: the whole cell's ledger (``balance_*``) is added.
+        (The whole cell's ledger is the scale coupling's:
+        :meth:`~conveyor_twin.coord.scale.ScaleCoupling.balance_counters`.)
         """
-        out = {'entered': float(sum(g.parts_in + g.parts_deposited for g in self.grids)),
+        return {'entered': float(sum(g.parts_in + g.parts_deposited for g in self.grids)),
                 'left': float(sum(g.parts_out + g.parts_taken for g in self.grids)),
                 'in_flight': float(sum(g.total_parts() for g in self.grids))}
-        if self.coupling is not None and self.coupling.enabled:
-            out.update({f'balance_{k}': v for k, v in self.coupling.ledger().items()})
-        return out

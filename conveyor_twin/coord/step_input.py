@@ -1,17 +1,14 @@
-"""What every scale needs for one step, and its byte form for the split (multi-process) layout.
+"""What every scale needs for one step.
 
 The coordinator builds one :class:`StepInput` per step. Composed in one process, the stages get
-the object itself; split over processes, they get :meth:`StepInput.pack` bytes over a ROS topic
-and :meth:`StepInput.unpack` them. Both carry the same float64 values, which is what keeps the
-two layouts bit-identical.
+the object itself; split over processes, they get its bytes
+(:func:`conveyor_twin.coord.codec.pack_step_input`) over a ROS topic. Both carry the same
+float64 values, which is what keeps the two layouts bit-identical.
 """
 
 from dataclasses import dataclass
-import struct
 
 import numpy as np
-
-_HEADER = struct.Struct('<QqII')  # step, time_ns, number of belts, number of actuators
 
 
 @dataclass
@@ -27,18 +24,3 @@ class StepInput:
     time_ns: int
     belt_speed: np.ndarray
     actuator_position: np.ndarray
-
-    def pack(self) -> bytes:
-        """Return the little-endian byte form."""
-        return b''.join((_HEADER.pack(self.step, self.time_ns, self.belt_speed.size,
-                                      self.actuator_position.size),
-                         self.belt_speed.astype('<f8').tobytes(),
-                         self.actuator_position.astype('<f8').tobytes()))
-
-    @classmethod
-    def unpack(cls, data: bytes) -> 'StepInput':
-        """Rebuild a :class:`StepInput` from :meth:`pack` bytes."""
-        step, time_ns, nb, na = _HEADER.unpack_from(data, 0)
-        belts = np.frombuffer(data, '<f8', nb, _HEADER.size).astype(np.float64)
-        actuators = np.frombuffer(data, '<f8', na, _HEADER.size + 8 * nb).astype(np.float64)
-        return cls(step, time_ns, belts, actuators)

@@ -28,29 +28,19 @@ class Stage(Protocol):
         """Restart from the cell's initial state."""
 
 
-def couple(stages: List[Stage]) -> List[Stage]:
-    """Append a :class:`~conveyor_twin.coord.scale.ScaleCoupling` if a micro and a macro
-    stage are both stepped here (it hands parts and mass over between them)."""
-    from conveyor_twin.coord.scale import ScaleCoupling
-    from conveyor_twin.coord.stages import MacroStage, MicroStage
-    micro = [s for s in stages if isinstance(s, MicroStage)]
-    macro = [s for s in stages if isinstance(s, MacroStage)]
-    if micro and macro and not any(isinstance(s, ScaleCoupling) for s in stages):
-        stages.append(ScaleCoupling(micro[0], macro[0]))
-    return stages
-
-
 class Twin:
     """Time, commands, actuation and the stages of one cell.
 
     :param cell: the validated cell.
     :param seed: random seed of the run (sources).
-    :param stages: the stages stepped in this process, in order.
+    :param stages: the stages stepped in this process, in order (the assembly,
+        :func:`~conveyor_twin.coord.assembly.build_twin`, passes micro, macro and the scale
+        coupling; none in the coordinator process of the split layout).
     """
 
     def __init__(self, cell: Cell, *, seed: int, stages: Sequence[Stage] = ()) -> None:
         self.lock = threading.RLock()
-        self.stages: List[Stage] = couple(list(stages))
+        self.stages: List[Stage] = list(stages)
         self.step_listeners: List[Callable[[StepInput, List[Command]], None]] = []
         self._last_commands: List[Command] = []
         self.commands = CommandBook(cell)

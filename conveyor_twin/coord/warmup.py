@@ -14,6 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from conveyor_twin.cell.model import Cell
+from conveyor_twin.coord.assembly import build_twin
 
 # Steps of the scratch twin: enough for every actuator to move and a part under each
 # barrier to produce its edges.
@@ -32,13 +33,8 @@ def warm_up(cell: Cell, seed: int, steps: int = WARM_UP_STEPS) -> int:
     actuator is sent to the far end of its range, and every belt runs at its maximum speed.
     Placements that overlap something are skipped. Nothing of the scratch twin is kept.
     """
-    from conveyor_twin.coord.stages import MacroStage, MicroStage
-    from conveyor_twin.coord.twin import Twin
-    micro = MicroStage(cell, seed)
-    stages = [micro]
-    if any(z.policy in ('macro', 'auto') for z in cell.zones):
-        stages.append(MacroStage(cell, seed))
-    twin = Twin(cell, seed=seed, stages=stages)
+    scratch = build_twin(cell, seed=seed)
+    twin, micro = scratch.twin, scratch.micro
     for type_index in range(len(cell.part_types)):
         for x, y in _beam_midpoints(cell):
             try:

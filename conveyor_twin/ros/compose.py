@@ -9,40 +9,18 @@ import os
 import threading
 from typing import Dict, Optional
 
-import rclpy
 from rclpy.context import Context
-from rclpy.executors import ExternalShutdownException
 
 from conveyor_twin.cell.model import Cell
+from conveyor_twin.coord.assembly import build_twin
 from conveyor_twin.coord.runner import raise_thread_priority, realtime_priority, Runner
-from conveyor_twin.coord.stages import MacroStage, MicroStage
 from conveyor_twin.coord.timing import TimeMode
-from conveyor_twin.coord.twin import Twin
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
+from conveyor_twin.ros.executors import make_executor, spin_until
 from conveyor_twin.ros.macro_node import MacroNode
 from conveyor_twin.ros.micro_node import MicroNode
 from conveyor_twin.ros.params import parameter_overrides
 from conveyor_twin.ros.qos import publish_failures
-
-
-def make_executor(context: Context):
-    """Return rclpy's EventsExecutor (about 3x less CPU) or, if absent, a single-threaded one."""
-    try:
-        from rclpy.experimental import EventsExecutor
-        return EventsExecutor(context=context)
-    except ImportError:  # pragma: no cover - older rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor(context=context)
-
-
-def spin_until(executor, stop: threading.Event, period: float = 0.05) -> None:
-    """Serve callbacks until ``stop`` is set (rclpy 9.1's EventsExecutor.spin() cannot be
-    ended by ``shutdown()`` from another thread; bounded spin_once calls can)."""
-    try:
-        while not stop.is_set() and executor.context.ok():
-            executor.spin_once(timeout_sec=period)
-    except (ExternalShutdownException, rclpy.executors.ShutdownException):
-        pass
 
 
 class ComposedTwin:
@@ -60,9 +38,10 @@ class ComposedTwin:
                  max_steps: Optional[int] = None) -> None:
         self.cell = cell
         self.context = context
-        self.micro_stage = MicroStage(cell, seed)
-        self.macro_stage = MacroStage(cell)
-        self.twin = Twin(cell, seed=seed, stages=[self.micro_stage, self.macro_stage])
+        self.assembled = build_twin(cell, seed=seed, layout='composed')
+        self.micro_stage = self.assembled.micro
+        self.macro_stage = self.assembled.macro
+        self.twin = self.assembled.twin
         self.runner = Runner(self.twin, mode, max_steps=max_steps, on_error=self._on_error)
         overrides = parameter_overrides(
             cell_file=cell.source_file if os.path.isfile(cell.source_file) else '', seed=seed,
@@ -73,7 +52,7 @@ class ComposedTwin:
         self.micro_node = MicroNode(self.micro_stage, **common)
         self.macro_node = MacroNode(self.macro_stage, **common)
         self.coordinator = CoordinatorNode(self.twin, self.runner, context=context,
-                                           namespace=namespace, spawn=self.micro_stage.spawn,
+                                           namespace=namespace, spawn=self.assembled.spawn,
                                            counters=self.counters,
                                            parameter_overrides=overrides)
         self.twin.step_listeners.append(lambda inp, _: self.micro_node.publish_step(inp))
@@ -91,9 +70,9 @@ class ComposedTwin:
 
     def counters(self) -> Dict[str, float]:
         """Part balance per scale: entered, left through sinks, in flight."""
-        micro = dict(self.micro_stage.counters(),
+        micro = dict(self.assembled.micro_counters(),
                      publish_failures=publish_failures(self.micro_node))
-        macro = dict(self.macro_stage.counters(),
+        macro = dict(self.assembled.macro_counters(),
                      publish_failures=publish_failures(self.macro_node))
         return {**{f'micro_{k}': v for k, v in micro.items()},
                 **{f'macro_{k}': v for k, v in macro.items()}}

@@ -20,9 +20,11 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import UInt8MultiArray
 
-from conveyor_twin.cell import CellError, load_cell
+from conveyor_twin.coord import codec
 from conveyor_twin.coord.clock import stamp
 from conveyor_twin.coord.commands import Command, CommandRejected
+from conveyor_twin.coord.requests import (check_reset, check_spawn, RequestRejected,
+                                          reset_message, SpawnRequest)
 from conveyor_twin.coord.runner import Runner
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.timing import TimeMode
@@ -44,14 +46,15 @@ class CoordinatorNode(Node):
     :param twin: the coordinator core.
     :param runner: the stepping thread (realtime/fast) or the lockstep stepper.
     :param remote_roles: in the split layout, the roles of the scale nodes to wait for each step.
-    :param spawn: places parts now, returning their ids (composed: the micro stage's spawn).
+    :param spawn: places a checked spawn request's parts now, returning their ids (composed:
+        the assembly's spawn).
     :param counters: returns part-balance counters for diagnostics and the summary.
     """
 
     def __init__(self, twin: Twin, runner: Runner, *, context=None,
                  namespace: Optional[str] = None,
                  remote_roles: tuple = (),
-                 spawn: Optional[Callable] = None,
+                 spawn: Optional[Callable[[SpawnRequest], np.ndarray]] = None,
                  counters: Optional[Callable[[], Dict[str, float]]] = None,
                  parameter_overrides=None) -> None:
         super().__init__('scale_coordinator', context=context, namespace=namespace,
@@ -149,7 +152,7 @@ class CoordinatorNode(Node):
 
     # -- split layout --------------------------------------------------------------------
     def _on_done(self, data: bytes) -> None:
-        role, step, reply = coupling.parse_done(coupling.from_cdr(data))
+        role, step, reply = codec.parse_done(codec.from_cdr(data))
         with self._done_cv:
             if role in self._done:
                 self._done[role] += 1
@@ -163,7 +166,7 @@ class CoordinatorNode(Node):
             raise TimeoutError('micro_simulator and macro_simulator are not connected')
         with self._done_cv:
             counts = dict(self._done)
-        self.coupling_pub.publish(coupling.to_cdr(payload))
+        self.coupling_pub.publish(codec.to_cdr(payload))
         deadline = time.monotonic() + timeout
         with self._done_cv:
             while any(self._done[r] <= counts[r] for r in counts):
@@ -180,7 +183,7 @@ class CoordinatorNode(Node):
             return {r: v[1] for r, v in self._replies.items()}
 
     def _step_remote(self, inp: StepInput, commands: List[Command]) -> None:
-        replies = self._send_and_wait(coupling.STEP + inp.pack(), inp.step)
+        replies = self._send_and_wait(codec.step_payload(inp), inp.step)
         # the scale nodes send their counters on diagnostics steps only: keep the last ones
         self._replies_fresh = all(replies.get(r) for r in self._remote_roles)
         if self._replies_fresh:
@@ -195,7 +198,7 @@ class CoordinatorNode(Node):
                 return self._step_replies
             try:
                 self._step_replies = self._send_and_wait(
-                    coupling.COUNTERS, self.twin.step_index, COUNTERS_TIMEOUT)
+                    codec.COUNTERS, self.twin.step_index, COUNTERS_TIMEOUT)
             except (TimeoutError, RuntimeError) as exc:
                 self.get_logger().warning(f'scale node counters unavailable: {exc}')
                 return self._step_replies
@@ -253,76 +256,48 @@ class CoordinatorNode(Node):
 
     def _on_reset(self, request: Reset.Request, response: Reset.Response) -> Reset.Response:
         try:
-            cell = load_cell(request.cell_file) if request.cell_file else self.twin.cell
-        except CellError as exc:
+            cell = check_reset(self.twin.cell, request.cell_file)
+        except RequestRejected as exc:
             response.success, response.message = False, str(exc)
-            return response
-        if cell is not self.twin.cell and not _same_interface(cell, self.twin.cell):
-            response.success = False
-            response.message = ('reset to a cell with other belts, actuators or light barriers '
-                                'needs a restart of the twin (the published arrays would change)')
             return response
         with self.twin.lock:
             before_ns = self.twin.time_ns
             self.twin.reset(cell, int(request.seed))
             self._replies_fresh = False
             if self._remote_roles:
-                payload = coupling.RESET + int(request.seed).to_bytes(8, 'little') + \
-                    (request.cell_file or '').encode()
-                self._send_and_wait(payload, 0)
+                self._send_and_wait(codec.reset_payload(request.seed, request.cell_file), 0)
             self.runner.pacer.restart()
             for listener in self.call_listeners:
                 listener('reset', before_ns, request)
         response.success = True
-        response.message = f'reset to step 0 with seed {request.seed} ({cell.settings.name})'
+        response.message = reset_message(request.seed, cell)
         return response
 
     def _on_spawn(self, request: SpawnParts.Request,
                   response: SpawnParts.Response) -> SpawnParts.Response:
-        cell = self.twin.cell
-        n = len(request.x)
         try:
-            type_index = cell.part_type_index(request.part_type)
-        except KeyError:
-            response.success = False
-            response.message = (f'unknown part_type {request.part_type!r} (known: '
-                                + ', '.join(p.name for p in cell.part_types) + ')')
-            return response
-        x, y = np.asarray(request.x, float), np.asarray(request.y, float)
-        yaw = np.asarray(request.yaw, float) if len(request.yaw) else np.zeros(n)
-        if not (len(request.y) == n and len(yaw) == n) or n == 0:
-            response.success = False
-            response.message = (f'x, y and yaw must have the same non-zero length '
-                                f'(got {n}, {len(request.y)}, {len(request.yaw)})')
-            return response
-        if not (np.isfinite(x).all() and np.isfinite(y).all() and np.isfinite(yaw).all()):
-            response.success, response.message = False, 'poses must be finite numbers'
-            return response
-        try:
+            spawn = check_spawn(self.twin.cell, request.part_type, request.x, request.y,
+                                request.yaw)
             with self.twin.lock:
                 if self._remote_roles:
                     self._replies_fresh = False
-                    ids = self._spawn_remote(type_index, x, y, yaw)
+                    ids = self._spawn_remote(spawn)
                 else:
-                    ids = self._spawn(type_index, x, y, yaw)
+                    ids = self._spawn(spawn)
                 for listener in self.call_listeners:
                     listener('spawn', self.twin.time_ns, request)
-        except ValueError as exc:
+        except ValueError as exc:  # RequestRejected, or placement refused
             response.success, response.message = False, str(exc)
             return response
         response.success = True
-        response.message = f'placed {n} {request.part_type} part(s)'
+        response.message = spawn.placed_message()
         response.id = [int(i) for i in ids]
         return response
 
-    def _spawn_remote(self, type_index: int, x, y, yaw) -> np.ndarray:
-        payload = (coupling.SPAWN + int(type_index).to_bytes(2, 'little')
-                   + np.ascontiguousarray(np.stack([x, y, yaw]), '<f8').tobytes())
+    def _spawn_remote(self, spawn: SpawnRequest) -> np.ndarray:
+        payload = codec.spawn_payload(spawn.type_index, spawn.x, spawn.y, spawn.yaw)
         replies = self._send_and_wait(payload, self.twin.step_index)
-        reply = replies.get(1, b'')
-        if reply[:1] == b'E':
-            raise ValueError(reply[1:].decode())
-        return np.frombuffer(reply[1:], '<u4')
+        return codec.parse_spawn_reply(replies.get(codec.MICRO_ROLE, b''))
 
     def publish_failures(self, counters: Dict[str, float]) -> int:
         """Publishes refused by the middleware: this node's and the scale nodes' (counters
@@ -348,19 +323,6 @@ class CoordinatorNode(Node):
         }
 
 
-def _same_interface(a, b) -> bool:
-    def names(cell):
-        return ([x.name for x in cell.belts], [x.name for x in cell.actuators],
-                [x.name for x in cell.light_barriers], [z.name for z in cell.zones])
-    return names(a) == names(b)
-
-
 def summary_json(node: CoordinatorNode) -> str:
     """Return :meth:`CoordinatorNode.summary` as one line of JSON."""
     return json.dumps(node.summary(), sort_keys=True)
-
-
-def main(argv: Optional[List[str]] = None) -> int:
-    """Run ``scale_coordinator`` as its own process (console script; split layout)."""
-    from conveyor_twin.ros.split import coordinator_main
-    return coordinator_main(argv)

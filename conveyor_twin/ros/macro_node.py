@@ -10,31 +10,38 @@ from typing import Dict, List, Optional
 
 from conveyor_twin_msgs.msg import DensityGrid
 
-from conveyor_twin.coord.mirror import has_coupling, MacroSide
+from conveyor_twin.coord import codec
+from conveyor_twin.coord.mirror import MacroSide
 from conveyor_twin.coord.stages import MacroStage
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.ros import coupling
 from conveyor_twin.ros.qos import raw_publish, STREAM_QOS
-from conveyor_twin.ros.scale_node import MACRO_ROLE, ScaleNode
+from conveyor_twin.ros.scale_node import ScaleNode
+from conveyor_twin.ros.standalone import run_scale_node
 from conveyor_twin.wire import cdr
 
 
 class MacroNode(ScaleNode):
-    """Publish one ``density`` message per macro zone and step."""
+    """Publish one ``density`` message per macro zone and step.
 
-    def __init__(self, stage: MacroStage, **kwargs) -> None:
-        super().__init__('macro_simulator', stage, MACRO_ROLE, **kwargs)
+    :param stage: the macro stage.
+    :param side: split layout, cells with ``macro``/``auto`` zones: the hand-over on a mirror
+        of the micro state (the assembly's ``macro_side``); the node then exchanges it with
+        the micro node every step.
+    """
+
+    def __init__(self, stage: MacroStage, *, side: Optional[MacroSide] = None,
+                 **kwargs) -> None:
+        super().__init__('macro_simulator', stage, codec.MACRO_ROLE, **kwargs)
         frame = stage.cell.settings.frame_id
         self._encoders = [cdr.DensityGridEncoder(frame, g.zone.name, g.origin_x, g.origin_y,
                                                  g.resolution, g.nx, g.ny)
                           for g in stage.grids]
         self.density_pub = self.create_publisher(DensityGrid, 'density', STREAM_QOS)
         self._pub_density = raw_publish(self.density_pub, self.get_logger())
-        self._side: Optional[MacroSide] = None  # the hand-over on a micro mirror (split)
+        self._side = side  # the hand-over on a micro mirror (split)
         self._states: Dict[int, memoryview] = {}  # micro states by step, arrived early
-        if self.remote and has_coupling(stage.cell):
-            # the mirror never runs sources: its seed does not matter
-            self._side = MacroSide(stage, stage.cell, 0)
+        if self.remote and side is not None:
             self.open_exchange(coupling.EDITS_TOPIC, coupling.MICRO_STATE_TOPIC,
                                self._on_micro_state)
         self.serve_coordinator()
@@ -44,7 +51,7 @@ class MacroNode(ScaleNode):
         self._couple()
 
     def _on_micro_state(self, data: bytes) -> None:
-        step, body = coupling.parse_stamped(coupling.from_cdr(data))
+        step, body = codec.parse_stamped(codec.from_cdr(data))
         self._states[step] = body
         self._couple()
 
@@ -60,16 +67,13 @@ class MacroNode(ScaleNode):
             self._states.clear()
         self._pending = None
         reply = self._side.couple(inp, state)
-        self.send_exchange(coupling.to_cdr(coupling.stamped(inp.step, reply)))
+        self.send_exchange(codec.to_cdr(codec.stamped(inp.step, reply)))
         self.finish_step(inp)
 
     def reset_stage(self, cell, seed: int) -> None:
-        """Restart the grids and rebind the hand-over."""
-        self.stage.reset(cell, seed)
-        self._pending = None
+        """Restart the grids and the hand-over; drop micro states that arrived early."""
+        super().reset_stage(cell, seed)
         self._states.clear()
-        if self._side is not None:
-            self._side.reset(cell, 0)
 
     def publish_step(self, inp: StepInput) -> None:
         """Publish every macro zone's density for the step just taken."""
@@ -84,8 +88,8 @@ class MacroNode(ScaleNode):
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Run ``macro_simulator`` as its own process, following a split-layout coordinator."""
-    from conveyor_twin.ros.standalone import run_scale_node
-    return run_scale_node(MacroNode, MacroStage, argv)
+    return run_scale_node('macro', lambda a, **kw: MacroNode(
+        a.macro, side=a.macro_side, counters=a.macro_counters, reset=a.reset_scales, **kw), argv)
 
 
 if __name__ == '__main__':

@@ -12,25 +12,33 @@ import threading
 from typing import List, Optional
 
 from conveyor_twin_msgs.msg import LightBarrierEdge, LightBarrierStates, PartStates
-import numpy as np
 from visualization_msgs.msg import MarkerArray
 
-from conveyor_twin.coord.mirror import has_coupling, MicroSide
+from conveyor_twin.coord import codec
+from conveyor_twin.coord.mirror import MicroSide
 from conveyor_twin.coord.runner import raise_thread_priority
 from conveyor_twin.coord.stages import MicroStage
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.ros.markers import CellMarkers
 from conveyor_twin.ros import coupling
 from conveyor_twin.ros.qos import EDGE_QOS, raw_publish, SLOW_QOS, STREAM_QOS
-from conveyor_twin.ros.scale_node import MICRO_ROLE, ScaleNode
+from conveyor_twin.ros.scale_node import ScaleNode
+from conveyor_twin.ros.standalone import run_scale_node
 from conveyor_twin.wire import cdr
 
 
 class MicroNode(ScaleNode):
-    """Publish ``parts``, ``light_barriers``, ``light_barrier_edges`` and part ``markers``."""
+    """Publish ``parts``, ``light_barriers``, ``light_barrier_edges`` and part ``markers``.
 
-    def __init__(self, stage: MicroStage, **kwargs) -> None:
-        super().__init__('micro_simulator', stage, MICRO_ROLE, **kwargs)
+    :param stage: the micro stage.
+    :param side: split layout, cells with ``macro``/``auto`` zones: the micro half of the
+        hand-over (the assembly's ``micro_side``); the node then exchanges it with the macro
+        node every step.
+    """
+
+    def __init__(self, stage: MicroStage, *, side: Optional[MicroSide] = None,
+                 **kwargs) -> None:
+        super().__init__('micro_simulator', stage, codec.MICRO_ROLE, **kwargs)
         cell = stage.cell
         frame = cell.settings.frame_id
         self._frame = frame
@@ -57,19 +65,18 @@ class MicroNode(ScaleNode):
             self._markers_thread = threading.Thread(target=self._markers_loop,
                                                     name='conveyor_twin_markers', daemon=True)
             self._markers_thread.start()
-        self._side = None  # the scale hand-over's micro half (split layout, coupled cells)
-        if self.remote and has_coupling(cell):
-            self._side = MicroSide(stage)
+        self._side = side  # the scale hand-over's micro half (split layout, coupled cells)
+        if self.remote and side is not None:
             self.open_exchange(coupling.MICRO_STATE_TOPIC, coupling.EDITS_TOPIC, self._on_edits)
         self.serve_coordinator()
 
     def exchange(self, inp: StepInput) -> None:
         """Send the step's micro state to the macro node (its edits finish the step)."""
-        self.send_exchange(coupling.to_cdr(coupling.stamped(inp.step, self._side.state_bytes())))
+        self.send_exchange(codec.to_cdr(codec.stamped(inp.step, self._side.state_bytes())))
 
     def _on_edits(self, data: bytes) -> None:
         """Replay the macro node's hand-over edits of the pending step, then finish it."""
-        step, body = coupling.parse_stamped(coupling.from_cdr(data))
+        step, body = codec.parse_stamped(codec.from_cdr(data))
         inp = self._pending
         if inp is None or step != inp.step:
             pending = None if inp is None else inp.step
@@ -79,13 +86,6 @@ class MicroNode(ScaleNode):
         self._pending = None
         self._side.apply(body)
         self.finish_step(inp)
-
-    def reset_stage(self, cell, seed: int) -> None:
-        """Restart the stage; re-attach the hand-over's micro half."""
-        self.stage.reset(cell, seed)
-        self._pending = None
-        if self._side is not None:
-            self._side.reset()
 
     def publish_step(self, inp: StepInput) -> None:
         """Publish the parts, barrier states and any barrier edges of the step just taken."""
@@ -130,20 +130,18 @@ class MicroNode(ScaleNode):
 
     def spawn_reply(self, body: bytes) -> bytes:
         """Place parts for a split-layout spawn request: ``E`` + message, or ``I`` + ids."""
-        type_index = int.from_bytes(body[:2], 'little')
-        poses = np.frombuffer(body[2:], '<f8').reshape(3, -1)
+        type_index, x, y, yaw = codec.parse_spawn(body)
         try:
-            ids = self.stage.spawn(type_index, poses[0].copy(), poses[1].copy(),
-                                   poses[2].copy())
+            ids = self.stage.spawn(type_index, x, y, yaw)
         except ValueError as exc:
-            return b'E' + str(exc).encode()
-        return b'I' + np.asarray(ids, '<u4').tobytes()
+            return codec.spawn_error(str(exc))
+        return codec.spawn_reply(ids)
 
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Run ``micro_simulator`` as its own process, following a split-layout coordinator."""
-    from conveyor_twin.ros.standalone import run_scale_node
-    return run_scale_node(MicroNode, MicroStage, argv)
+    return run_scale_node('micro', lambda a, **kw: MicroNode(
+        a.micro, side=a.micro_side, counters=a.micro_counters, reset=a.reset_scales, **kw), argv)
 
 
 if __name__ == '__main__':

@@ -1,34 +1,21 @@
 """What the two scale nodes share: the split-layout coupling and the markers cadence."""
 
-import json
 import time
-from typing import Dict, Optional
+from typing import Callable, Dict, Optional
 
 from rclpy.node import Node
 from std_msgs.msg import UInt8MultiArray
 
 from conveyor_twin.cell import load_cell
+from conveyor_twin.cell.model import Cell
+from conveyor_twin.coord import codec
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.ros import coupling
 from conveyor_twin.ros.params import declare_twin_parameters, DIAGNOSTICS_PERIOD_STEPS
 from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures, raw_publish
 
-MICRO_ROLE = 1
-MACRO_ROLE = 2
 CONNECT_PERIOD = 0.01  # s between checks that the scale exchange is matched (split layout)
 DONE_MATCH_TIMEOUT = 10.0  # s the first reply waits for its writer to see the coordinator
-
-
-def encode_counters(counters: Dict[str, float]) -> bytes:
-    """Return a stage's part-balance counters as the reply bytes of a step."""
-    return json.dumps(counters, sort_keys=True).encode()
-
-
-def decode_counters(prefix: str, reply: bytes) -> Dict[str, float]:
-    """Return the counters of :func:`encode_counters` bytes, keys prefixed ``prefix_``."""
-    if not reply:
-        return {}
-    return {f'{prefix}_{k}': v for k, v in json.loads(reply).items()}
 
 
 class ScaleNode(Node):
@@ -42,18 +29,27 @@ class ScaleNode(Node):
     serve the coordinator only once that exchange is matched (:meth:`peers_matched`).
 
     :param stage: the scale's core wrapper (``advance``, ``reset``).
-    :param role: :data:`MICRO_ROLE` or :data:`MACRO_ROLE`.
+    :param role: :data:`~conveyor_twin.coord.codec.MICRO_ROLE` or
+        :data:`~conveyor_twin.coord.codec.MACRO_ROLE`.
+    :param counters: the part-balance counters the node reports (split layout; None: the
+        stage's).
+    :param reset: restarts the stage and whatever the assembly built with it (split layout;
+        None: the stage's reset).
     :param markers_rate: MarkerArray rate [Hz]; 0 disables markers.
     """
 
     def __init__(self, name: str, stage, role: int, *, context=None,
                  namespace: Optional[str] = None, remote: bool = False,
+                 counters: Optional[Callable[[], Dict[str, float]]] = None,
+                 reset: Optional[Callable[[Cell, int], None]] = None,
                  markers_rate: float = 30.0, step_s: float = 1e-3,
                  parameter_overrides=None) -> None:
         super().__init__(name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
         self.stage = stage
         self.role = role
+        self._stage_counters = counters or stage.counters
+        self._reset = reset or stage.reset
         self.parameters = declare_twin_parameters(self, step_s=step_s)
         self.markers_every = (max(1, round(1.0 / (markers_rate * step_s)))
                               if markers_rate > 0 else 0)
@@ -129,33 +125,33 @@ class ScaleNode(Node):
         self._report(inp.step, reply)
 
     def _counters(self) -> bytes:
-        return encode_counters(dict(self.stage.counters(),
-                                    publish_failures=publish_failures(self)))
+        return codec.encode_counters(dict(self._stage_counters(),
+                                          publish_failures=publish_failures(self)))
 
-    def reset_stage(self, cell, seed: int) -> None:
-        """Restart the stage (split layout reset)."""
-        self.stage.reset(cell, seed)
+    def reset_stage(self, cell: Cell, seed: int) -> None:
+        """Restart the stage (split layout reset); drop a pending step."""
+        self._reset(cell, seed)
+        self._pending = None
 
     def _report(self, step: int, reply: bytes = b'') -> None:
         self._last_step = step
         if not self._done_matched:
             self._done_matched = self._wait_done_matched()
-        self._done_pub.publish(coupling.to_cdr(coupling.done(self.role, step, reply)))
+        self._done_pub.publish(codec.to_cdr(codec.done(self.role, step, reply)))
 
     def _on_coupling(self, data: bytes) -> None:
-        payload = coupling.from_cdr(data)
+        payload = codec.from_cdr(data)
         kind, body = payload[:1], payload[1:]
-        if kind == coupling.STEP:
-            self.advance_remote(StepInput.unpack(body))
-        elif kind == coupling.RESET:
-            seed = int.from_bytes(body[:8], 'little')
-            cell_file = body[8:].decode()
+        if kind == codec.STEP:
+            self.advance_remote(codec.unpack_step_input(body))
+        elif kind == codec.RESET:
+            seed, cell_file = codec.parse_reset(body)
             cell = load_cell(cell_file) if cell_file else self.stage.cell
             self.reset_stage(cell, seed)
             self._report(0)
-        elif kind == coupling.SPAWN:
+        elif kind == codec.SPAWN:
             self._report(self._last_step, self.spawn_reply(body))
-        elif kind == coupling.COUNTERS:
+        elif kind == codec.COUNTERS:
             self._report(self._last_step, self._counters())
         else:
             self.get_logger().error(f'unknown coupling payload {kind!r}; ignored')

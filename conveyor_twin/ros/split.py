@@ -1,30 +1,26 @@
-"""The split layout: micro, macro and coordinator nodes as three processes.
+"""The split layout's coordinator process: micro, macro and coordinator nodes as three processes.
 
 ``scale_coordinator`` (this module's :func:`coordinator_main`) drives time; every step it sends
 the step input over the coupling topic and waits for both scale nodes to report the step done.
-``conveyor-twin run --split`` starts the three processes and prints the coordinator's summary.
+``conveyor-twin run --split`` (:mod:`conveyor_twin.cli.run`) starts the three processes with
+:func:`ros_args` and prints the summary line the coordinator prints (:data:`SUMMARY_PREFIX`).
 With ``macro``/``auto`` zones the micro and macro nodes also exchange the scale hand-over every
 step (micro state to the macro node, edits back; :mod:`conveyor_twin.coord.mirror`), so the
 streams are bit-identical to the composed layout's.
 """
 
-import argparse
 import json
-import os
 import signal
-import subprocess
 import sys
 import threading
-import time
 from typing import Dict, List, Optional
 
-from conveyor_twin.cell import CellError, load_cell
+from conveyor_twin.coord.assembly import build_twin
+from conveyor_twin.coord.codec import decode_counters, MACRO_ROLE, MICRO_ROLE
 from conveyor_twin.coord.runner import Runner
 from conveyor_twin.coord.timing import TimeMode
-from conveyor_twin.coord.twin import Twin
-from conveyor_twin.ros.compose import make_executor, spin_until
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
-from conveyor_twin.ros.scale_node import decode_counters, MACRO_ROLE, MICRO_ROLE
+from conveyor_twin.ros.executors import make_executor, spin_until
 from conveyor_twin.ros.standalone import start_process
 
 SCALE_CONNECT_TIMEOUT = 30.0  # s for the scale processes to appear and match
@@ -44,10 +40,11 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
         return 1
     context, params, cell, seed = started
     max_steps = round(params.duration / cell.settings.step) if params.duration > 0 else None
-    twin = Twin(cell, seed=seed)
-    runner = Runner(twin, params.mode, max_steps=max_steps)
+    assembled = build_twin(cell, seed=seed, layout='coordinator')
+    runner = Runner(assembled.twin, params.mode, max_steps=max_steps)
     holder: Dict[str, CoordinatorNode] = {}
-    node = CoordinatorNode(twin, runner, context=context, remote_roles=(MICRO_ROLE, MACRO_ROLE),
+    node = CoordinatorNode(assembled.twin, runner, context=context,
+                           remote_roles=assembled.remote_roles,
                            counters=lambda: _remote_counters(holder['node']))
     holder['node'] = node
     executor = make_executor(context)
@@ -89,8 +86,10 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
     return code
 
 
-def _ros_args(cell_file: str, seed: Optional[int], mode: str, duration: float,
-              namespace: Optional[str], markers_rate: float) -> List[str]:
+def ros_args(cell_file: str, seed: Optional[int], mode: str, duration: float,
+             namespace: Optional[str], markers_rate: float) -> List[str]:
+    """Return the ``--ros-args`` of the three processes of a split run (durations [s], rates
+    [Hz])."""
     args = ['--ros-args', '-p', f'mode:={mode}', '-p', f'duration:={float(duration)}',
             '-p', f'markers_rate:={float(markers_rate)}']
     if cell_file:  # rcl cannot parse an empty override; empty is the default anyway
@@ -100,61 +99,6 @@ def _ros_args(cell_file: str, seed: Optional[int], mode: str, duration: float,
     if namespace:
         args += ['-r', f'__ns:={namespace}']
     return args
-
-
-def run_split(args: argparse.Namespace) -> int:
-    """Start the three node processes, wait for the coordinator, print its summary."""
-    from conveyor_twin.cli.run import _print_summary
-
-    cell_file = os.path.abspath(args.cell) if args.cell else ''
-    try:
-        cell = load_cell(cell_file or None)
-    except CellError as exc:
-        print(f'invalid cell: {exc}', file=sys.stderr)
-        return 1
-    ros_args = _ros_args(cell_file, args.seed, args.mode, args.duration, args.namespace,
-                         args.markers_rate)
-    env = dict(os.environ)
-    modules = ['conveyor_twin.ros.micro_node', 'conveyor_twin.ros.macro_node']
-    scales = [subprocess.Popen([sys.executable, '-m', m] + ros_args, env=env)
-              for m in modules]
-    coordinator = subprocess.Popen(
-        [sys.executable, '-m', 'conveyor_twin.ros.split'] + ros_args, env=env,
-        stdout=subprocess.PIPE, text=True)
-    summary = None
-
-    def read_until_eof() -> None:
-        nonlocal summary
-        for line in coordinator.stdout:
-            if line.startswith(SUMMARY_PREFIX):
-                summary = json.loads(line[len(SUMMARY_PREFIX):])
-            elif not args.quiet:
-                print(line, end='', file=sys.stderr)
-
-    try:
-        try:
-            read_until_eof()
-        except KeyboardInterrupt:
-            # the coordinator stops on SIGINT and prints its summary: keep reading it
-            coordinator.send_signal(signal.SIGINT)
-            read_until_eof()
-        code = coordinator.wait(30)
-    finally:
-        for proc in scales:
-            proc.send_signal(signal.SIGINT)
-        deadline = time.monotonic() + 10.0
-        for proc in scales:
-            try:
-                proc.wait(max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-    if summary is None:
-        print('the coordinator process ended without a summary', file=sys.stderr)
-        return code or 1
-    summary['layout'] = 'split'
-    _print_summary(summary, args.json)
-    return code
 
 
 if __name__ == '__main__':

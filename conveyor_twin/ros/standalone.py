@@ -3,15 +3,17 @@
 import signal
 import sys
 import threading
-from typing import List, Optional
+from typing import Callable, List, Optional
 
 import rclpy
 from rclpy.context import Context
+from rclpy.node import Node
 
 from conveyor_twin.cell import CellError, load_cell
+from conveyor_twin.coord.assembly import AssembledTwin, build_twin, Layout
 from conveyor_twin.coord.runner import freeze_heap
 from conveyor_twin.coord.warmup import warm_up
-from conveyor_twin.ros.compose import make_executor, spin_until
+from conveyor_twin.ros.executors import make_executor, spin_until
 from conveyor_twin.ros.params import declare_twin_parameters
 
 
@@ -40,16 +42,22 @@ def start_process(name: str, argv: Optional[List[str]] = None):
     return context, params, cell, seed
 
 
-def run_scale_node(node_class, stage_class, argv: Optional[List[str]] = None) -> int:
-    """Build the stage from the node parameters, serve the coupling topic until shutdown."""
-    started = start_process(node_class.__name__.lower(), argv)
+def run_scale_node(layout: Layout, make_node: Callable[..., Node],
+                   argv: Optional[List[str]] = None) -> int:
+    """Build the scale role ``layout`` (``micro`` or ``macro``) of the split layout from the
+    node parameters, wrap it in its node, serve the coupling topic until shutdown.
+
+    :param make_node: called with the :class:`AssembledTwin` and the node's keyword
+        arguments (``context``, ``remote``, ``markers_rate``, ``step_s``); returns the node.
+    """
+    started = start_process(f'{layout}node', argv)
     if started is None:
         return 1
     context, params, cell, seed = started
-    stage = stage_class(cell, seed)
+    assembled: AssembledTwin = build_twin(cell, seed=seed, layout=layout)
     warm_up(cell, seed)  # load the step kernels now, not during the first steps
-    node = node_class(stage, context=context, remote=True, markers_rate=params.markers_rate,
-                      step_s=cell.settings.step)
+    node = make_node(assembled, context=context, remote=True, markers_rate=params.markers_rate,
+                     step_s=cell.settings.step)
     executor = make_executor(context)
     executor.add_node(node)
     stop = threading.Event()

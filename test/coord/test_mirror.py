@@ -8,10 +8,10 @@ import pytest
 import yaml
 
 from conveyor_twin.cell.loader import cell_from_mapping, default_cell_text
-from conveyor_twin.coord.mirror import (encode_state, has_coupling, load_state, MacroSide,
-                                        MicroSide, MirrorSim)
+from conveyor_twin.coord.assembly import build_twin
+from conveyor_twin.coord.codec import encode_state, load_state
+from conveyor_twin.coord.mirror import has_coupling, MirrorSim
 from conveyor_twin.coord.scale import ScaleCoupling
-from conveyor_twin.coord.stages import MacroStage, MicroStage
 from conveyor_twin.coord.twin import Twin
 from conveyor_twin.micro.sim import MicroSim
 from test.scale.deflector_scenario import deflector_cell
@@ -25,15 +25,18 @@ class Pair:
 
     def __init__(self, cell, seed: int = 1) -> None:
         self.cell = cell
-        self.c_micro, self.c_macro = MicroStage(cell, seed), MacroStage(cell)
-        self.composed = Twin(cell, seed=seed, stages=[self.c_micro, self.c_macro])
+        composed = build_twin(cell, seed=seed)
+        self.c_micro, self.c_macro = composed.micro, composed.macro
+        self.composed = composed.twin
         self.c_coupling = self.composed.stages[-1]
         assert isinstance(self.c_coupling, ScaleCoupling)
         self.c_coupling.check = True
         self.coordinator = Twin(cell, seed=seed)  # inputs only: no stages
-        self.s_micro, self.s_macro = MicroStage(cell, seed), MacroStage(cell)
-        self.micro_side = MicroSide(self.s_micro)
-        self.macro_side = MacroSide(self.s_macro, cell, seed, check=True)
+        micro_role = build_twin(cell, seed=seed, layout='micro')
+        macro_role = build_twin(cell, seed=seed, layout='macro', check_balance=True)
+        self.s_micro, self.s_macro = micro_role.micro, macro_role.macro
+        self.micro_side = micro_role.micro_side
+        self.macro_side = macro_role.macro_side
         self.bytes_sent = 0
 
     @property

@@ -5,6 +5,7 @@ from typing import List
 import numpy as np
 
 from conveyor_twin.cell import load_cell
+from conveyor_twin.coord.codec import pack_step_input, unpack_step_input
 from conveyor_twin.coord.runner import Runner
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.timing import TimeMode
@@ -43,7 +44,7 @@ def test_commands_take_effect_at_the_next_step_boundary() -> None:
 
 def test_step_input_round_trips_exactly() -> None:
     inp = StepInput(7, 7_000_000, np.array([0.1, -0.3]), np.array([np.pi, 1e-300]))
-    back = StepInput.unpack(inp.pack())
+    back = unpack_step_input(pack_step_input(inp))
     assert back.step == 7 and back.time_ns == 7_000_000
     assert back.belt_speed.tobytes() == inp.belt_speed.tobytes()
     assert back.actuator_position.tobytes() == inp.actuator_position.tobytes()

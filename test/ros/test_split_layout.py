@@ -14,7 +14,7 @@ from conveyor_twin.cell import load_cell
 from conveyor_twin.coord.stages import MacroStage
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.ros.compose import ComposedTwin
-from conveyor_twin.ros.split import _ros_args
+from conveyor_twin.ros.split import ros_args
 from conveyor_twin.wire import cdr
 from test.ros.test_node_parameters import check_parameters as check_node_parameters, NODES
 from test.ros.twin_driver import Driver
@@ -44,7 +44,7 @@ def _density_per_step(cell) -> int:
 
 def start_split(ros_processes, tmp_path, tag: str, cell_file: str = ''):
     """Start micro, macro and coordinator processes in lockstep; return them."""
-    args = _ros_args(cell_file, SEED, 'lockstep', 0.0, None, 0.0)
+    args = ros_args(cell_file, SEED, 'lockstep', 0.0, None, 0.0)
     procs = []
     for module in ('conveyor_twin.ros.micro_node', 'conveyor_twin.ros.macro_node',
                    'conveyor_twin.ros.split'):

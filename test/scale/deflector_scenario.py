@@ -17,8 +17,7 @@ import numpy as np
 import yaml
 
 from conveyor_twin.cell.loader import cell_from_mapping, default_cell_text
-from conveyor_twin.coord.stages import MacroStage, MicroStage
-from conveyor_twin.coord.twin import Twin
+from conveyor_twin.coord.assembly import build_twin
 
 PARTS = 2400
 STEPS = 20000
@@ -61,8 +60,8 @@ def deflector_run(policy: str, seed: int, perturbation: str = '') -> Dict[str, o
     largest ledger residual (the ledger is checked every step: BalanceError otherwise) and the
     largest density [parts/m^2, summed over cells] seen in sensor-window cells."""
     cell = deflector_cell(policy, perturbation)
-    micro, macro = MicroStage(cell, seed), MacroStage(cell)
-    twin = Twin(cell, seed=seed, stages=[micro, macro])
+    built = build_twin(cell, seed=seed)
+    twin, micro, macro = built.twin, built.micro, built.macro
     coupling = twin.stages[-1]
     coupling.check = True
     edges: List[Tuple[int, bool, int]] = []

@@ -8,10 +8,9 @@ import pytest
 import yaml
 
 from conveyor_twin.cell.loader import cell_from_mapping, default_cell_text
+from conveyor_twin.coord.assembly import build_twin
 from conveyor_twin.coord.scale import RELEASE_SPREAD, ScaleCoupling
-from conveyor_twin.coord.stages import MacroStage, MicroStage
 from conveyor_twin.coord.tiles import slip_per_tile
-from conveyor_twin.coord.twin import Twin
 
 
 def _cell(zones: List[Dict], rate: float = 200.0, length: Optional[float] = None,
@@ -25,8 +24,8 @@ def _cell(zones: List[Dict], rate: float = 200.0, length: Optional[float] = None
 
 
 def _twin(cell, seed: int = 1):
-    micro, macro = MicroStage(cell, seed), MacroStage(cell)
-    twin = Twin(cell, seed=seed, stages=[micro, macro])
+    built = build_twin(cell, seed=seed)
+    twin, micro, macro = built.twin, built.micro, built.macro
     coupling = twin.stages[-1]
     assert isinstance(coupling, ScaleCoupling)
     coupling.check = True
@@ -318,8 +317,8 @@ def _barrier_run(zones: List[Dict], rate: float) -> int:
     d['sources'][0].update(rate=rate, max_parts=1500)
     d['zones'] = zones
     cell = cell_from_mapping(d)
-    micro, macro = MicroStage(cell, 1), MacroStage(cell)
-    twin = Twin(cell, seed=1, stages=[micro, macro])
+    built = build_twin(cell, seed=1)
+    twin, micro = built.twin, built.micro
     twin.step(int(1500 / rate * 1000) + 4500)
     return int(micro.barrier_edge_count()[0])
 

@@ -15,8 +15,7 @@ import pytest
 import yaml
 
 from conveyor_twin.cell.loader import cell_from_mapping, default_cell_text
-from conveyor_twin.coord.stages import MacroStage, MicroStage
-from conveyor_twin.coord.twin import Twin
+from conveyor_twin.coord.assembly import build_twin
 
 from .deflector_scenario import deflector_run, exit_time, mean_exit_time, PARTS
 
@@ -72,8 +71,8 @@ def _stopper_run(policy: str) -> List[float]:
                             'min_dwell': 0.2, 'sensor_margin': 0.05}},
                   {'name': 'out', 'policy': 'micro', 'region': [2.6, -0.25, 6.0, 0.25]}]
     cell = cell_from_mapping(d)
-    micro, macro = MicroStage(cell, 1), MacroStage(cell)
-    twin = Twin(cell, seed=1, stages=[micro, macro])
+    built = build_twin(cell, seed=1)
+    twin, micro, macro = built.twin, built.micro, built.macro
     coupling = twin.stages[-1]
     coupling.check = True
     twin.commands.submit_actuator('stopper', 0.008)

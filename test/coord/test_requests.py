@@ -1,0 +1,52 @@
+"""What a spawn or a reset request may contain (:mod:`conveyor_twin.coord.requests`)."""
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from conveyor_twin.cell import load_cell
+from conveyor_twin.cell.loader import default_cell_text
+from conveyor_twin.coord.requests import check_reset, check_spawn, RequestRejected
+
+
+def test_a_good_spawn_names_its_type_and_defaults_yaw() -> None:
+    cell = load_cell()
+    name = cell.part_types[-1].name
+    request = check_spawn(cell, name, [1.0, 1.2], [0.0, 0.1], [])
+    assert request.type_index == len(cell.part_types) - 1 and request.count == 2
+    assert np.array_equal(request.yaw, np.zeros(2))
+    assert request.placed_message() == f'placed 2 {name} part(s)'
+
+
+@pytest.mark.parametrize('args, text', [
+    (('bolt', [1.0], [0.0], [0.0]), "unknown part_type 'bolt' (known: "),
+    ((None, [1.0, 1.1], [0.0], [0.0]), 'same non-zero length (got 2, 1, 1)'),
+    ((None, [], [], []), 'same non-zero length (got 0, 0, 0)'),
+    ((None, [1.0], [0.0], [0.0, 1.0]), 'same non-zero length (got 1, 1, 2)'),
+    ((None, [1.0], [math.nan], [0.0]), 'poses must be finite numbers'),
+    ((None, [1.0], [0.0], [math.inf]), 'poses must be finite numbers'),
+])
+def test_a_bad_spawn_is_rejected_with_its_reason(args, text) -> None:
+    cell = load_cell()
+    part_type = args[0] or cell.part_types[0].name
+    with pytest.raises(RequestRejected) as info:
+        check_spawn(cell, part_type, *args[1:])
+    assert text in str(info.value)
+
+
+def test_reset_keeps_or_loads_a_cell_with_the_same_interface(tmp_path) -> None:
+    cell = load_cell()
+    assert check_reset(cell, '') is cell
+    same = tmp_path / 'same.yaml'
+    same.write_text(default_cell_text())
+    assert check_reset(cell, str(same)).settings.name == cell.settings.name
+    with pytest.raises(RequestRejected, match='nonexistent.yaml'):
+        check_reset(cell, str(tmp_path / 'nonexistent.yaml'))
+    d = yaml.safe_load(default_cell_text())
+    d['belts'][0]['name'] = 'other'
+    other = tmp_path / 'other.yaml'
+    other.write_text(yaml.safe_dump(d))
+    with pytest.raises(RequestRejected, match='needs a restart of the twin'):
+        check_reset(cell, str(other))
