@@ -1,9 +1,9 @@
 """``conveyor-twin resimulate FILE``: re-run a recording and compare every message bit for bit.
 
 Rebuilds the cell from the recording (attachment ``cell.yaml``, seed, step, namespace, markers
-rate), applies the recorded accepted commands at their steps, steps the composed twin in
-lockstep in this process (nothing is published; DDS discovery is off) and compares every
-recorded stream message with the re-run's bytes. Exit code 0: identical; 1: the first
+rate), applies the recorded accepted commands at their steps, steps the twin's cores in this
+process (no ROS: nothing is published) and compares every recorded stream message with the
+bytes of the re-run's frames. Exit code 0: identical; 1: the first
 difference is printed (topic, message number, step, byte offset, field); 2: the recording
 cannot be re-simulated (the message says why).
 """
@@ -50,21 +50,12 @@ def main(argv: Optional[List[str]] = None) -> int:
     if not os.path.isfile(args.file):
         print(f'conveyor-twin resimulate: {args.file}: no such file', file=sys.stderr)
         return 2
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'OFF')
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.signals import SignalHandlerOptions
+    from conveyor_twin.record.resimulate import resimulate
 
-    from conveyor_twin.ros.resimulate import resimulate
-
-    context = Context()
-    rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        report = resimulate(args.file, context=context).as_dict()
+        report = resimulate(args.file).as_dict()
     except RecordingError as exc:
         print(f'conveyor-twin resimulate: {exc}', file=sys.stderr)
         return 2
-    finally:
-        rclpy.try_shutdown(context=context)
     print(json.dumps(report, sort_keys=True) if args.json else format_report(report))
     return 0 if report['ok'] else 1

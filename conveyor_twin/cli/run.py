@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help='MarkerArray rate on `markers` [Hz]; 0 disables')
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
     p.add_argument('--quiet', action='store_true', help='no progress line')
-    from conveyor_twin.ros.record_tap import add_arguments
+    from conveyor_twin.ros.run_recording import add_arguments
     add_arguments(p)
     return p
 
@@ -95,7 +95,7 @@ def run_composed(args: argparse.Namespace) -> int:
     twin = ComposedTwin(cell, seed=seed, mode=mode, context=context, namespace=args.namespace,
                         markers_rate=args.markers_rate, max_steps=max_steps)
     from conveyor_twin.record.errors import RecordingError
-    from conveyor_twin.ros.record_tap import format_recording, start_recording
+    from conveyor_twin.ros.run_recording import format_recording, start_recording
     try:
         recording = start_recording(twin, args, seed=seed, mode=mode.value)
     except (ValueError, RecordingError) as exc:

@@ -2,47 +2,23 @@
 
 rosbag2 (metadata version 9, Jazzy and Kilted) writes the key ``offered_qos_profiles`` of each
 channel as the YAML dump of a list of profiles with policy names as strings
-(``rosbag2_storage/qos.cpp``); ``ros2 bag play`` re-offers them. The profiles below mirror
-``conveyor_twin/ros/qos.py`` without importing rclpy; durations are the RMW "infinite"
+(``rosbag2_storage/qos.cpp``); ``ros2 bag play`` re-offers them. The profiles are those of the
+contract table (:mod:`conveyor_twin.contract`); durations are the RMW "infinite"
 (``RMW_DURATION_INFINITE`` = 9223372036 s 854775807 ns), as a graph query reports them for
 publishers that leave them unset.
 """
 
-from dataclasses import dataclass
 from typing import Sequence
+
+from conveyor_twin.contract import (CLOCK_QOS, COMMAND_QOS, EDGE_QOS, OfferedQos, SLOW_QOS,
+                                    STREAM_QOS, TOPICS)
+
+__all__ = ['CLOCK_QOS', 'COMMAND_QOS', 'EDGE_QOS', 'OfferedQos', 'SLOW_QOS', 'STREAM_QOS',
+           'default_qos', 'profile_dict', 'profiles_yaml']
 
 _INFINITE = (9223372036, 854775807)
 
-
-@dataclass(frozen=True)
-class OfferedQos:
-    """One offered QoS profile (policy names as rmw's ``*_to_str`` spells them)."""
-
-    history: str = 'keep_last'
-    depth: int = 100
-    reliability: str = 'reliable'
-    durability: str = 'volatile'
-    liveliness: str = 'automatic'
-
-
-#: Every-step streams: reliable, keep-last 100.
-STREAM_QOS = OfferedQos()
-#: Light-barrier edges: reliable, deeper history.
-EDGE_QOS = OfferedQos(depth=1000)
-#: /clock as simulators publish it: best effort, keep-last 1.
-CLOCK_QOS = OfferedQos(depth=1, reliability='best_effort')
-#: Commands.
-COMMAND_QOS = OfferedQos(depth=100)
-#: Diagnostics and other slow topics.
-SLOW_QOS = OfferedQos(depth=10)
-
-_BY_TYPE = {
-    'rosgraph_msgs/msg/Clock': CLOCK_QOS,
-    'conveyor_twin_msgs/msg/LightBarrierEdge': EDGE_QOS,
-    'conveyor_twin_msgs/msg/BeltCommand': COMMAND_QOS,
-    'conveyor_twin_msgs/msg/ActuatorCommand': COMMAND_QOS,
-    'diagnostic_msgs/msg/DiagnosticArray': SLOW_QOS,
-}
+_BY_TYPE = {t.type_name: t.qos for t in TOPICS.values()}
 
 
 def default_qos(type_name: str) -> OfferedQos:

@@ -1,74 +1,42 @@
-"""The contract's topics as a recorder or a replayer sees them: name, type, QoS, time source.
+"""The contract's topics as a recorder or a replayer sees them: names, types, QoS, stamps.
 
-No rclpy here: the table is plain data (types by full name, QoS as
-:class:`conveyor_twin.record.qos.OfferedQos`), so the recorder node, the replayer and the
-offline tools (info, plot) share it. Names are relative (a namespace moves them) except
-``/clock``, which is absolute as simulators publish it.
+The table itself is :mod:`conveyor_twin.contract` (no rclpy); this module adds what recording
+and replaying need around it: absolute names in a namespace (:func:`resolve`,
+:func:`relative`), the selection of topics to record (:func:`select`) and, for bytes received
+from another process, the simulation time they carry (:func:`stamp_ns`). Names are relative (a
+namespace moves them) except ``/clock``, which is absolute as simulators publish it.
 
-Log time of a recorded message (:func:`stamp_ns`): the simulation time it carries, read straight
-from the CDR bytes: ``header.stamp`` is the first 8 bytes of the payload of every stamped type
-(``int32 sec``, ``uint32 nanosec``), and the payload of ``rosgraph_msgs/Clock`` is the time
-itself. Commands carry no time.
+``header.stamp`` is the first 8 bytes of the payload of every stamped type (``int32 sec``,
+``uint32 nanosec``), and the payload of ``rosgraph_msgs/Clock`` is the time itself. Commands
+carry no time.
 """
 
 import struct
-from typing import Dict, Iterable, List, NamedTuple, Optional
+from typing import Dict, Iterable, List, Optional
 
+from conveyor_twin.contract import OfferedQos, Stamp, Topic, TOPICS
 from . import qos as qos_mod
-from .qos import OfferedQos
+
+__all__ = ['CLOCK', 'CONTRACT_TOPICS', 'HEADER', 'NONE', 'OfferedQos', 'STAMP_BY_TYPE',
+           'TopicSpec', 'qos_mod', 'relative', 'resolve', 'select', 'spec_of', 'stamp_ns']
 
 #: ``header.stamp`` (or a Clock's time) at the payload start: the stamp is the first field.
-HEADER = 'header'
-CLOCK = 'clock'
-NONE = ''
+HEADER = Stamp.HEADER
+CLOCK = Stamp.CLOCK
+NONE = Stamp.NONE
 
 _STAMP_LE = struct.Struct('<iI')
 _STAMP_BE = struct.Struct('>iI')
 NS_PER_S = 1_000_000_000
 
-
-class TopicSpec(NamedTuple):
-    """One topic of the contract.
-
-    :param name: relative name (absolute for ``/clock``).
-    :param type_name: full type name, ``pkg/msg/Type``.
-    :param qos: the QoS the twin offers on it (what a subscriber should request).
-    :param stamp: where its time is: :data:`HEADER`, :data:`CLOCK` or :data:`NONE`.
-    :param default: recorded by default (``markers`` is opt-in: viewer data).
-    :param command: an input of the twin (a replay publishing it drives a live twin).
-    """
-
-    name: str
-    type_name: str
-    qos: OfferedQos
-    stamp: str
-    default: bool = True
-    command: bool = False
-
-
-_MSGS = 'conveyor_twin_msgs/msg/'
-
-#: The contract topics by relative name (architecture.md, ROS interface).
-CONTRACT_TOPICS: Dict[str, TopicSpec] = {spec.name: spec for spec in (
-    TopicSpec('parts', _MSGS + 'PartStates', qos_mod.STREAM_QOS, HEADER),
-    TopicSpec('density', _MSGS + 'DensityGrid', qos_mod.STREAM_QOS, HEADER),
-    TopicSpec('light_barriers', _MSGS + 'LightBarrierStates', qos_mod.STREAM_QOS, HEADER),
-    TopicSpec('light_barrier_edges', _MSGS + 'LightBarrierEdge', qos_mod.EDGE_QOS, HEADER),
-    TopicSpec('belt_states', _MSGS + 'BeltStates', qos_mod.STREAM_QOS, HEADER),
-    TopicSpec('actuator_states', _MSGS + 'ActuatorStates', qos_mod.STREAM_QOS, HEADER),
-    TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', qos_mod.CLOCK_QOS, CLOCK),
-    TopicSpec('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', qos_mod.SLOW_QOS, HEADER),
-    TopicSpec('markers', 'visualization_msgs/msg/MarkerArray', qos_mod.SLOW_QOS, NONE,
-              default=False),
-    TopicSpec('belt_command', _MSGS + 'BeltCommand', qos_mod.COMMAND_QOS, NONE,
-              command=True),
-    TopicSpec('actuator_command', _MSGS + 'ActuatorCommand', qos_mod.COMMAND_QOS, NONE,
-              command=True),
-)}
+#: One topic of the contract (:class:`conveyor_twin.contract.Topic`).
+TopicSpec = Topic
+#: The contract topics (streams and commands) by relative name.
+CONTRACT_TOPICS: Dict[str, Topic] = TOPICS
 
 #: Stamp location by type, for topics known only by their type (recorded or discovered).
-STAMP_BY_TYPE: Dict[str, str] = {spec.type_name: spec.stamp
-                                 for spec in CONTRACT_TOPICS.values()}
+STAMP_BY_TYPE: Dict[str, Stamp] = {spec.type_name: spec.stamp
+                                   for spec in CONTRACT_TOPICS.values()}
 
 
 def resolve(name: str, namespace: str = '') -> str:

@@ -15,6 +15,8 @@ from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.assembly import build_twin
 from conveyor_twin.coord.runner import raise_thread_priority, realtime_priority, Runner
 from conveyor_twin.coord.timing import TimeMode
+from conveyor_twin.output.hub import TwinOutput
+from conveyor_twin.output.producers import CoordinatorOutput, MacroOutput, MicroOutput
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
 from conveyor_twin.ros.executors import make_executor, spin_until
 from conveyor_twin.ros.macro_node import MacroNode
@@ -47,16 +49,21 @@ class ComposedTwin:
             cell_file=cell.source_file if os.path.isfile(cell.source_file) else '', seed=seed,
             mode=mode, markers_rate=markers_rate,
             duration=max_steps * cell.settings.step if max_steps else 0.0)
+        #: One frame per step of every stream (the nodes, the recorder and other sinks take it).
+        self.output = TwinOutput([
+            CoordinatorOutput(self.twin,
+                              diagnostics=lambda t: self.coordinator.diagnostics_cdr(t)),
+            MicroOutput(self.micro_stage), MacroOutput(self.macro_stage)])
         common = dict(context=context, namespace=namespace, markers_rate=markers_rate,
-                      step_s=cell.settings.step, parameter_overrides=overrides)
-        self.micro_node = MicroNode(self.micro_stage, **common)
-        self.macro_node = MacroNode(self.macro_stage, **common)
+                      step_s=cell.settings.step, parameter_overrides=overrides,
+                      output=self.output)
         self.coordinator = CoordinatorNode(self.twin, self.runner, context=context,
                                            namespace=namespace, spawn=self.assembled.spawn,
                                            counters=self.counters,
-                                           parameter_overrides=overrides)
-        self.twin.step_listeners.append(lambda inp, _: self.micro_node.publish_step(inp))
-        self.twin.step_listeners.append(lambda inp, _: self.macro_node.publish_step(inp))
+                                           parameter_overrides=overrides, output=self.output)
+        self.micro_node = MicroNode(self.micro_stage, **common)
+        self.macro_node = MacroNode(self.macro_stage, **common)
+        self.twin.step_listeners.append(self.output.on_step)
         if mode is TimeMode.REALTIME:
             self.micro_node.markers_priority = realtime_priority(helper=True)
         self.executor = make_executor(context)

@@ -12,14 +12,15 @@ import time
 from typing import Any, Callable, Dict, List, Optional
 
 from builtin_interfaces.msg import Time
-from conveyor_twin_msgs.msg import ActuatorCommand, ActuatorStates, BeltCommand, BeltStates
+from conveyor_twin_msgs.msg import ActuatorCommand, BeltCommand
 from conveyor_twin_msgs.srv import Reset, SpawnParts, Step
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.node import Node
-from rosgraph_msgs.msg import Clock
+from rclpy.serialization import serialize_message
 from std_msgs.msg import UInt8MultiArray
 
+from conveyor_twin import contract
 from conveyor_twin.coord import codec
 from conveyor_twin.coord.clock import stamp
 from conveyor_twin.coord.commands import Command, CommandRejected
@@ -29,11 +30,16 @@ from conveyor_twin.coord.runner import Runner
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.coord.twin import Twin
+from conveyor_twin.output.hub import TwinOutput
+from conveyor_twin.output.producers import CoordinatorOutput
 from conveyor_twin.ros import coupling
-from conveyor_twin.ros.params import declare_twin_parameters, DIAGNOSTICS_PERIOD_STEPS
-from conveyor_twin.ros.qos import (CLOCK_QOS, COMMAND_QOS, COUPLING_QOS, publish_failures,
-                                   raw_publish, SLOW_QOS, STREAM_QOS)
-from conveyor_twin.wire import cdr
+from conveyor_twin.ros.endpoints import create_service, create_subscription
+from conveyor_twin.ros.params import declare_twin_parameters
+from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures
+from conveyor_twin.ros.stream_publisher import StreamPublisher
+
+#: The streams this node publishes from the frames.
+STREAMS = (contract.CLOCK, contract.BELT_STATES, contract.ACTUATOR_STATES, contract.DIAGNOSTICS)
 
 REMOTE_STEP_TIMEOUT = 10.0        # s a split scale node may take to report a step done
 COUNTERS_TIMEOUT = 2.0            # s the split scale nodes may take to send their counters
@@ -49,6 +55,9 @@ class CoordinatorNode(Node):
     :param spawn: places a checked spawn request's parts now, returning their ids (composed:
         the assembly's spawn).
     :param counters: returns part-balance counters for diagnostics and the summary.
+    :param output: the twin's output whose frames this node publishes (composed: shared by the
+        three nodes, attached to the twin by the assembly); None: the node makes the output of
+        the coordinator's streams and attaches it to ``twin`` (split layout).
     """
 
     def __init__(self, twin: Twin, runner: Runner, *, context=None,
@@ -56,7 +65,7 @@ class CoordinatorNode(Node):
                  remote_roles: tuple = (),
                  spawn: Optional[Callable[[SpawnRequest], np.ndarray]] = None,
                  counters: Optional[Callable[[], Dict[str, float]]] = None,
-                 parameter_overrides=None) -> None:
+                 parameter_overrides=None, output: Optional[TwinOutput] = None) -> None:
         super().__init__('scale_coordinator', context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
         self.twin = twin
@@ -65,25 +74,17 @@ class CoordinatorNode(Node):
         self._spawn = spawn
         self._counters = counters or (lambda: {})
         self._last_log = 0.0
-        cell = twin.cell
-        self._frame = cell.settings.frame_id
-        self._belt_states = cdr.BeltStatesEncoder(self._frame, [b.name for b in cell.belts])
-        self._actuator_states = cdr.ActuatorStatesEncoder(
-            self._frame, [a.name for a in cell.actuators])
-        self.clock_pub = self.create_publisher(Clock, '/clock', CLOCK_QOS)
-        self.belt_pub = self.create_publisher(BeltStates, 'belt_states', STREAM_QOS)
-        self.actuator_pub = self.create_publisher(ActuatorStates, 'actuator_states', STREAM_QOS)
-        self.diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', SLOW_QOS)
-        self._pub_clock = raw_publish(self.clock_pub, self.get_logger())
-        self._pub_belts = raw_publish(self.belt_pub, self.get_logger())
-        self._pub_actuators = raw_publish(self.actuator_pub, self.get_logger())
-        self.create_subscription(BeltCommand, 'belt_command', self._on_belt_command,
-                                 COMMAND_QOS)
-        self.create_subscription(ActuatorCommand, 'actuator_command',
-                                 self._on_actuator_command, COMMAND_QOS)
-        self.create_service(Step, 'step', self._on_step)
-        self.create_service(Reset, 'reset', self._on_reset)
-        self.create_service(SpawnParts, 'spawn_parts', self._on_spawn)
+        self._frame = twin.cell.settings.frame_id
+        self.streams = StreamPublisher(self, STREAMS)
+        self.clock_pub = self.streams.publishers[contract.CLOCK]
+        self.belt_pub = self.streams.publishers[contract.BELT_STATES]
+        self.actuator_pub = self.streams.publishers[contract.ACTUATOR_STATES]
+        self.diag_pub = self.streams.publishers[contract.DIAGNOSTICS]
+        create_subscription(self, contract.BELT_COMMAND, self._on_belt_command)
+        create_subscription(self, contract.ACTUATOR_COMMAND, self._on_actuator_command)
+        create_service(self, contract.STEP, self._on_step)
+        create_service(self, contract.RESET, self._on_reset)
+        create_service(self, contract.SPAWN_PARTS, self._on_spawn)
         self._remote_roles = tuple(remote_roles)
         #: Called with (kind 'spawn' or 'reset', sim time before it [ns], the request) for every
         #: successful ``spawn_parts``/``reset`` call, under the twin's lock (the recorder).
@@ -106,18 +107,16 @@ class CoordinatorNode(Node):
             self._done_sub = self.coupling_node.create_subscription(
                 UInt8MultiArray, coupling.DONE_TOPIC, self._on_done, COUPLING_QOS, raw=True)
             twin.step_listeners.append(self._step_remote)
-        twin.step_listeners.append(self._publish_step)
+        if output is None:
+            output = TwinOutput([CoordinatorOutput(twin, diagnostics=self.diagnostics_cdr)])
+            twin.step_listeners.append(output.on_step)
+        self.output = output
+        output.subscribe(self.streams)
 
     # -- per step ------------------------------------------------------------------------
-    def _publish_step(self, inp: StepInput, commands: List[Command]) -> None:
-        twin = self.twin
-        self._pub_clock(cdr.encode_clock(inp.time_ns))
-        self._pub_belts(self._belt_states.encode(
-            inp.time_ns, twin.actuation.belt_target, inp.belt_speed))
-        self._pub_actuators(self._actuator_states.encode(
-            inp.time_ns, twin.actuation.actuator_target, inp.actuator_position))
-        if inp.step % DIAGNOSTICS_PERIOD_STEPS == 0:
-            self.diag_pub.publish(self.diagnostics(inp.time_ns))
+    def diagnostics_cdr(self, time_ns: int) -> bytes:
+        """Return :meth:`diagnostics` as CDR bytes (the frame's ``diagnostics``)."""
+        return serialize_message(self.diagnostics(time_ns))
 
     def diagnostics(self, time_ns: int) -> DiagnosticArray:
         """Return step-time statistics, overruns, real-time factor, rejections, part balance."""

@@ -8,42 +8,45 @@ edits back (:mod:`conveyor_twin.coord.mirror`); its counters then carry the cell
 import sys
 from typing import Dict, List, Optional
 
-from conveyor_twin_msgs.msg import DensityGrid
-
+from conveyor_twin import contract
 from conveyor_twin.coord import codec
 from conveyor_twin.coord.mirror import MacroSide
 from conveyor_twin.coord.stages import MacroStage
 from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.output.hub import TwinOutput
+from conveyor_twin.output.producers import MacroOutput
 from conveyor_twin.ros import coupling
-from conveyor_twin.ros.qos import raw_publish, STREAM_QOS
 from conveyor_twin.ros.scale_node import ScaleNode
 from conveyor_twin.ros.standalone import run_scale_node
-from conveyor_twin.wire import cdr
+from conveyor_twin.ros.stream_publisher import StreamPublisher
 
 
 class MacroNode(ScaleNode):
     """Publish one ``density`` message per macro zone and step.
 
+    A sink of the twin's frames: it publishes the macro part of every frame of ``output``.
+    Without ``output`` (split layout) the node makes the output of its own stage and builds a
+    frame when its step is done.
+
     :param stage: the macro stage.
     :param side: split layout, cells with ``macro``/``auto`` zones: the hand-over on a mirror
         of the micro state (the assembly's ``macro_side``); the node then exchanges it with
         the micro node every step.
+    :param output: the twin's output to subscribe to (composed: shared by the three nodes).
     """
 
     def __init__(self, stage: MacroStage, *, side: Optional[MacroSide] = None,
-                 **kwargs) -> None:
+                 output: Optional[TwinOutput] = None, **kwargs) -> None:
         super().__init__('macro_simulator', stage, codec.MACRO_ROLE, **kwargs)
-        frame = stage.cell.settings.frame_id
-        self._encoders = [cdr.DensityGridEncoder(frame, g.zone.name, g.origin_x, g.origin_y,
-                                                 g.resolution, g.nx, g.ny)
-                          for g in stage.grids]
-        self.density_pub = self.create_publisher(DensityGrid, 'density', STREAM_QOS)
-        self._pub_density = raw_publish(self.density_pub, self.get_logger())
+        self.output = output if output is not None else TwinOutput([MacroOutput(stage)])
+        self.streams = StreamPublisher(self, (contract.DENSITY,))
+        self.density_pub = self.streams.publishers[contract.DENSITY]
         self._side = side  # the hand-over on a micro mirror (split)
         self._states: Dict[int, memoryview] = {}  # micro states by step, arrived early
         if self.remote and side is not None:
             self.open_exchange(coupling.EDITS_TOPIC, coupling.MICRO_STATE_TOPIC,
                                self._on_micro_state)
+        self.output.subscribe(self.streams)
         self.serve_coordinator()
 
     def exchange(self, inp: StepInput) -> None:
@@ -76,10 +79,8 @@ class MacroNode(ScaleNode):
         self._states.clear()
 
     def publish_step(self, inp: StepInput) -> None:
-        """Publish every macro zone's density for the step just taken."""
-        for encoder, grid in zip(self._encoders, self.stage.grids):
-            self._pub_density(encoder.encode(inp.time_ns, inp.step, grid.density,
-                                             grid.total_parts()))
+        """Split layout: build this process's frame of the step just taken (and publish it)."""
+        self.output.on_step(inp)
 
     def spawn_reply(self, body: bytes) -> bytes:
         """Parts are spawned by the micro scale; the macro node only acknowledges."""

@@ -11,50 +11,53 @@ import sys
 import threading
 from typing import List, Optional
 
-from conveyor_twin_msgs.msg import LightBarrierEdge, LightBarrierStates, PartStates
-from visualization_msgs.msg import MarkerArray
 
+from conveyor_twin import contract
 from conveyor_twin.coord import codec
 from conveyor_twin.coord.mirror import MicroSide
 from conveyor_twin.coord.runner import raise_thread_priority
 from conveyor_twin.coord.stages import MicroStage
 from conveyor_twin.coord.step_input import StepInput
-from conveyor_twin.ros.markers import CellMarkers
+from conveyor_twin.output.frame import Frame
+from conveyor_twin.output.hub import TwinOutput
+from conveyor_twin.output.markers import CellMarkers
+from conveyor_twin.output.producers import MicroOutput
 from conveyor_twin.ros import coupling
-from conveyor_twin.ros.qos import EDGE_QOS, raw_publish, SLOW_QOS, STREAM_QOS
+from conveyor_twin.ros.endpoints import create_publisher
+from conveyor_twin.ros.qos import raw_publish
 from conveyor_twin.ros.scale_node import ScaleNode
 from conveyor_twin.ros.standalone import run_scale_node
-from conveyor_twin.wire import cdr
+from conveyor_twin.ros.stream_publisher import StreamPublisher
+
+#: The streams this node publishes from the frames (markers it builds itself).
+STREAMS = (contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES)
 
 
 class MicroNode(ScaleNode):
     """Publish ``parts``, ``light_barriers``, ``light_barrier_edges`` and part ``markers``.
 
+    A sink of the twin's frames: it publishes the micro part of every frame of ``output``.
+    Without ``output`` (split layout) the node makes the output of its own stage and builds a
+    frame when its step is done.
+
     :param stage: the micro stage.
     :param side: split layout, cells with ``macro``/``auto`` zones: the micro half of the
         hand-over (the assembly's ``micro_side``); the node then exchanges it with the macro
         node every step.
+    :param output: the twin's output to subscribe to (composed: shared by the three nodes).
     """
 
     def __init__(self, stage: MicroStage, *, side: Optional[MicroSide] = None,
-                 **kwargs) -> None:
+                 output: Optional[TwinOutput] = None, **kwargs) -> None:
         super().__init__('micro_simulator', stage, codec.MICRO_ROLE, **kwargs)
         cell = stage.cell
-        frame = cell.settings.frame_id
-        self._frame = frame
-        self._barrier_names = [b.name for b in cell.light_barriers]
-        self._parts = cdr.PartStatesEncoder(frame, capacity=cell.micro.capacity)
-        self._barriers = cdr.LightBarrierStatesEncoder(frame, self._barrier_names)
+        self.output = output if output is not None else TwinOutput([MicroOutput(stage)])
         self._markers = CellMarkers(cell)
-        self.parts_pub = self.create_publisher(PartStates, 'parts', STREAM_QOS)
-        self.barrier_pub = self.create_publisher(LightBarrierStates, 'light_barriers',
-                                                 STREAM_QOS)
-        self.edge_pub = self.create_publisher(LightBarrierEdge, 'light_barrier_edges',
-                                              EDGE_QOS)
-        self.markers_pub = self.create_publisher(MarkerArray, 'markers', SLOW_QOS)
-        self._pub_parts = raw_publish(self.parts_pub, self.get_logger())
-        self._pub_barriers = raw_publish(self.barrier_pub, self.get_logger())
-        self._pub_edge = raw_publish(self.edge_pub, self.get_logger())
+        self.streams = StreamPublisher(self, STREAMS)
+        self.parts_pub = self.streams.publishers[contract.PARTS]
+        self.barrier_pub = self.streams.publishers[contract.LIGHT_BARRIERS]
+        self.edge_pub = self.streams.publishers[contract.LIGHT_BARRIER_EDGES]
+        self.markers_pub = create_publisher(self, contract.MARKERS)
         self._pub_markers = raw_publish(self.markers_pub, self.get_logger())
         self._markers_due = None
         self.markers_priority = 0  # SCHED_FIFO priority of the markers thread (0: normal)
@@ -68,6 +71,7 @@ class MicroNode(ScaleNode):
         self._side = side  # the scale hand-over's micro half (split layout, coupled cells)
         if self.remote and side is not None:
             self.open_exchange(coupling.MICRO_STATE_TOPIC, coupling.EDITS_TOPIC, self._on_edits)
+        self.output.subscribe(self)
         self.serve_coordinator()
 
     def exchange(self, inp: StepInput) -> None:
@@ -88,22 +92,19 @@ class MicroNode(ScaleNode):
         self.finish_step(inp)
 
     def publish_step(self, inp: StepInput) -> None:
-        """Publish the parts, barrier states and any barrier edges of the step just taken."""
-        stage = self.stage
-        ids, part_type, x, y, yaw, vx, vy, wz = stage.parts()
-        self._pub_parts(self._parts.encode(inp.time_ns, inp.step, ids, part_type, x, y, yaw,
-                                           vx, vy, wz))
-        blocked, edge_count = stage.barrier_blocked(), stage.barrier_edge_count()
-        self._pub_barriers(self._barriers.encode(inp.time_ns, inp.step, blocked, edge_count))
-        barrier, rising, time_ns, part_id = stage.edges()
-        for i in range(len(barrier)):
-            self._pub_edge(cdr.encode_light_barrier_edge(
-                int(time_ns[i]), self._frame, self._barrier_names[barrier[i]], bool(rising[i]),
-                int(part_id[i])))
-        if self.markers_every and inp.step % self.markers_every == 0:
+        """Split layout: build this process's frame of the step just taken (and publish it)."""
+        self.output.on_step(inp)
+
+    def on_frame(self, frame: Frame) -> None:
+        """Publish the frame's parts, barrier states and edges; hand due markers' state to
+        the markers thread."""
+        self.streams.on_frame(frame)
+        if self.markers_every and frame.step % self.markers_every == 0:
+            _, part_type, x, y = self.stage.parts()[:4]
             # copies (a few us) here; the ~0.5 ms of building happens off the stepping thread
-            self._markers_due = (inp.time_ns, part_type.copy(), x.copy(), y.copy(),
-                                 blocked.copy(), inp.actuator_position.copy())
+            self._markers_due = (frame.time_ns, part_type.copy(), x.copy(), y.copy(),
+                                 self.stage.barrier_blocked().copy(),
+                                 frame.input.actuator_position.copy())
             self._markers_wake.set()
 
     def _markers_loop(self) -> None:
@@ -118,7 +119,9 @@ class MicroNode(ScaleNode):
             if self._markers_closed:
                 return
             if due is not None:
-                self._pub_markers(self._markers.build(*due))
+                data = self._markers.build(*due)
+                self._pub_markers(data)
+                self.output.emit(contract.MARKERS, data)
 
     def destroy_node(self) -> None:
         """Stop the markers thread, then destroy the node."""

@@ -7,10 +7,10 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from conveyor_twin.contract import DIAGNOSTICS_PERIOD_STEPS  # noqa: F401 - used by the nodes
 from conveyor_twin.coord.timing import TimeMode
 
 DEFAULT_MARKERS_RATE = 30.0  # Hz, viewer rate of `markers`
-DIAGNOSTICS_PERIOD_STEPS = 1000  # steps between two `diagnostics` (1 Hz of sim time at 1 ms)
 
 
 @dataclass(frozen=True)

@@ -1,13 +1,13 @@
-"""QoS profiles of the contract (architecture.md, ROS interface) as rclpy profiles.
+"""QoS profiles of the contract as rclpy profiles, and the raw publisher of the streams.
 
-The profiles are defined once, without rclpy, in :mod:`conveyor_twin.record.qos` (recordings
-store them as rosbag2 does); this module turns them into ``rclpy.qos.QoSProfile``.
+The profiles are defined once, without rclpy, in the contract table
+(:mod:`conveyor_twin.contract`); this module turns them into ``rclpy.qos.QoSProfile``.
 """
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from conveyor_twin.record import qos as offered
+from conveyor_twin import contract as offered
 
 _HISTORY = {'keep_last': HistoryPolicy.KEEP_LAST, 'keep_all': HistoryPolicy.KEEP_ALL}
 _RELIABILITY = {'reliable': ReliabilityPolicy.RELIABLE,
@@ -57,7 +57,7 @@ class RawPublisher:
 
     def __init__(self, publisher, logger=None) -> None:
         self.publisher = publisher
-        self.send = publisher.handle.publish_raw  # replaced by a recording tap, if any
+        self.send = publisher.handle.publish_raw
         self.failures = 0
         self._logger = logger
 
@@ -78,5 +78,12 @@ def raw_publish(publisher, logger=None) -> RawPublisher:
 
 
 def publish_failures(node) -> int:
-    """Return the refused publishes of every :class:`RawPublisher` attribute of ``node``."""
-    return sum(p.failures for p in vars(node).values() if isinstance(p, RawPublisher))
+    """Return the refused publishes of every :class:`RawPublisher` attribute of ``node`` (and
+    of the publishers of a frame publisher attribute, which has a ``raw_publishers`` tuple)."""
+    total = 0
+    for p in vars(node).values():
+        if isinstance(p, RawPublisher):
+            total += p.failures
+        else:
+            total += sum(r.failures for r in getattr(p, 'raw_publishers', ()))
+    return total

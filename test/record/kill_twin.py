@@ -21,8 +21,8 @@ def main() -> int:
     faulthandler.register(signal.SIGUSR1, all_threads=True)  # the test's view of a hang
     probe_path, argv = sys.argv[1], sys.argv[2:]
     probe = np.memmap(probe_path, dtype='<i8', mode='r+', shape=(RING + 1,))
-    from conveyor_twin.ros import record_tap
-    start = record_tap.start_recording
+    from conveyor_twin.ros import run_recording
+    start = run_recording.start_recording
 
     def start_recording(composed, *args, **kwargs):
         recording = start(composed, *args, **kwargs)
@@ -34,7 +34,7 @@ def main() -> int:
         composed.twin.step_listeners.append(on_step)
         return recording
 
-    record_tap.start_recording = start_recording
+    run_recording.start_recording = start_recording
     from conveyor_twin.cli import run
     return run.main(argv)
 

@@ -191,7 +191,7 @@ def test_markers_and_diagnostics_decode_with_ros_typesupport(decoded):
 @pytest.mark.ros
 @pytest.mark.parametrize('bag', BAGS)
 def test_resimulate_bag_is_bit_identical(bag, ros_context):
-    from conveyor_twin.ros.resimulate import resimulate
+    from conveyor_twin.record.resimulate import resimulate
     report = resimulate(str(BAGS_DIR / bag), context=ros_context)
     if not report.ok:
         pytest.fail(STALE.format(bag=bag, what=f'First difference: {report.difference}'))
@@ -237,7 +237,7 @@ def altered_copy(src, dst, topic, sequence):
 
 @pytest.mark.ros
 def test_resimulate_detects_an_altered_message(tmp_path, ros_context):
-    from conveyor_twin.ros.resimulate import resimulate
+    from conveyor_twin.record.resimulate import resimulate
     path = tmp_path / 'altered.mcap'
     offset = altered_copy(BAGS_DIR / 'default_4s.mcap', path, '/parts', 3210)
     report = resimulate(str(path), context=ros_context)
@@ -271,7 +271,7 @@ def test_resimulate_refuses_what_it_cannot_rerun(tmp_path):
 @pytest.mark.parametrize('fraction', [0.3, 0.77])
 def test_resimulate_a_truncated_recording_compares_what_is_left(tmp_path, ros_context,
                                                                 fraction):
-    from conveyor_twin.ros.resimulate import resimulate
+    from conveyor_twin.record.resimulate import resimulate
     data = (BAGS_DIR / 'default_markers_2s.mcap').read_bytes()
     path = tmp_path / 'cut.mcap'
     path.write_bytes(data[:int(len(data) * fraction)])

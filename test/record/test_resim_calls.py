@@ -9,8 +9,8 @@ from conveyor_twin.record import reader
 from conveyor_twin.record.errors import RecordingError
 from conveyor_twin.record.writer import ACCEPTED_RESETS, ACCEPTED_SPAWNS, McapRecorder
 from conveyor_twin.ros.compose import ComposedTwin
-from conveyor_twin.ros.record_tap import TwinRecording
-from conveyor_twin.ros.resimulate import resimulate
+from conveyor_twin.ros.run_recording import TwinRecording
+from conveyor_twin.record.resimulate import resimulate
 from conveyor_twin.wire import cdr
 
 pytestmark = pytest.mark.ros
@@ -75,7 +75,7 @@ def test_spawn_calls_are_recorded_and_resimulate_bit_for_bit(tmp_path, ros_conte
 def test_a_resimulation_without_the_spawns_differs(tmp_path, ros_context, monkeypatch):
     path = tmp_path / 'spawns.mcap'
     record(path, ros_context)
-    from conveyor_twin.ros import resimulate as module
+    from conveyor_twin.record import resimulate as module
     monkeypatch.setattr(module, '_spawns', lambda *args: {})
     report = resimulate(str(path), context=ros_context)
     assert not report.ok and report.difference.step == 1  # the parts placed before step 1

@@ -56,7 +56,7 @@ def test_every_published_stream_and_the_commands_are_recorded(tmp_path, ros_proc
     assert meta['recorded_by'] == 'conveyor-twin run' and meta['markers_rate'] == '30.0'
     assert b'seed_test_rig' in reader.read_attachment(str(path), 'cell.yaml')
 
-    from conveyor_twin.ros.resimulate import resimulate
+    from conveyor_twin.record.resimulate import resimulate
     report = resimulate(str(path), context=ros_context)
     assert report.ok, str(report.difference)
     assert report.commands == 3 and report.compared['/markers'] == markers
@@ -85,7 +85,7 @@ def test_selection_decimation_and_drops_are_counted(tmp_path, ros_processes, ros
     stats = json.loads(reader.read_metadata(str(path))['conveyor_twin_recorder']['stats'])
     assert stats['topics']['/parts']['dropped'] == topics['/parts']['dropped']
     # what was recorded still re-simulates: drops and decimation only skip
-    from conveyor_twin.ros.resimulate import resimulate
+    from conveyor_twin.record.resimulate import resimulate
     report = resimulate(str(path), context=ros_context)
     assert report.ok, str(report.difference)
     assert sum(report.compared.values()) == sum(

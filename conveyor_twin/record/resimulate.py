@@ -3,16 +3,17 @@
 A recording of ``conveyor-twin run --record`` is self-contained: the cell description
 (attachment ``cell.yaml``), the seed, the step, the namespace and the markers rate (metadata
 ``conveyor_twin``) and every accepted command with the step at which it took effect. This module
-rebuilds the composed twin from them in lockstep, schedules the commands at their steps, taps
-its publishers without publishing (:func:`conveyor_twin.ros.record_tap.tap`, so no DDS traffic)
-and steps it on demand while reading the recording in file order: the recorded message with
-sequence number ``s`` on a topic is compared with the ``s``-th message the re-run publishes on
-it (sequence numbers count every message offered, so decimation and queue drops only skip).
+rebuilds the twin's cores from them (no ROS: the stages, the coordinator core and the twin's
+output), schedules the commands at their steps, collects the frames the output builds and
+steps the core on demand while reading the recording in file order: the recorded message with
+sequence number ``s`` on a topic is compared with the ``s``-th message of that topic in the
+re-run's frames (sequence numbers count every message offered, so decimation and queue drops
+only skip).
 
 ``markers`` are matched by their stamp, not their number: the micro node builds them off the
 stepping thread and, under load, publishes only the latest due one, so which steps have markers
 depends on the wall clock; the re-run builds the markers of every due step on the stepping
-thread with the same :class:`~conveyor_twin.ros.markers.CellMarkers` and the recorded ones
+thread with the same :class:`~conveyor_twin.output.markers.CellMarkers` and the recorded ones
 must be among them, byte for byte. ``diagnostics`` are not compared: they carry wall-clock step
 times. Parts placed through the
 ``spawn_parts`` service are recorded with the step after which they were placed and placed again
@@ -25,10 +26,16 @@ import math
 from typing import Any, Deque, Dict, List, Optional, Tuple
 
 from conveyor_twin.cell import CellError, load_cell_text
+from conveyor_twin.contract import STREAMS
 from conveyor_twin.coord.commands import CommandRejected
-from conveyor_twin.coord.timing import TimeMode
+from conveyor_twin.coord.stages import MacroStage, MicroStage
+from conveyor_twin.coord.twin import Twin
+from conveyor_twin.output.hub import TwinOutput
+from conveyor_twin.output.markers import CellMarkers
+from conveyor_twin.output.producers import CoordinatorOutput, MacroOutput, MicroOutput
 from conveyor_twin.record import reader
 from conveyor_twin.record.errors import RecordingError
+from conveyor_twin.record.topics import resolve
 from conveyor_twin.record.writer import (ACCEPTED_ACTUATOR_COMMANDS, ACCEPTED_BELT_COMMANDS,
                                          ACCEPTED_RESETS, ACCEPTED_SPAWNS)
 from conveyor_twin.wire import cdr
@@ -161,18 +168,28 @@ def _first_byte(a: bytes, b: bytes) -> int:
     return min(len(a), len(b))
 
 
-def resimulate(path: str, *, context: Any) -> ResimReport:
+class _Rerun:
+    """The cores of a recording's cell, stepped on demand, with the frames they emit."""
+
+    def __init__(self, cell: Any, seed: int) -> None:
+        self.micro = MicroStage(cell, seed)
+        self.macro = MacroStage(cell)
+        self.twin = Twin(cell, seed=seed, stages=[self.micro, self.macro])
+        self.output = TwinOutput([CoordinatorOutput(self.twin), MicroOutput(self.micro),
+                                  MacroOutput(self.macro)])
+        self.twin.step_listeners.append(self.output.on_step)
+
+
+def resimulate(path: str, *, context: Any = None) -> ResimReport:
     """Re-run the recording's cell with its seed and commands; compare every message.
 
     :param path: a recording made by ``conveyor-twin run --record`` (closed or killed).
-    :param context: an initialised rclpy Context (nodes are created, nothing is published).
+    :param context: not used (re-simulation runs the cores without ROS); accepted so that
+        callers passing an rclpy Context keep working.
     :return: the report; ``report.difference`` is the first mismatch.
     :raises RecordingError: if the file is not readable or not self-contained (the message
         names the file and what is missing or invalid).
     """
-    from conveyor_twin.ros.compose import ComposedTwin
-    from conveyor_twin.ros.record_tap import tap
-
     path = str(path)
     meta = _meta(path)
     seed, step_ns = int(meta['seed']), int(meta['step_ns'])
@@ -186,25 +203,21 @@ def resimulate(path: str, *, context: Any) -> ResimReport:
     except ValueError:
         raise RecordingError(f'{path}: metadata conveyor_twin.markers_rate = '
                              f'{meta["markers_rate"]!r}: expected a number') from None
-    namespace = meta.get('namespace', '') or None
+    namespace = meta.get('namespace', '')
     report = ResimReport(path, complete_source=reader.is_complete(path))
-    twin = ComposedTwin(cell, seed=seed, mode=TimeMode.LOCKSTEP, context=context,
-                        namespace=namespace, markers_rate=0.0)
-    try:
-        if twin.twin.dt_ns != step_ns:
-            raise RecordingError(f'{path}: metadata step_ns {step_ns} differs from the step of '
-                                 f'cell.yaml ({twin.twin.dt_ns} ns)')
-        _schedule(path, twin, step_ns, report)
-        spawns = _spawns(path, cell, step_ns, report)
-        markers = _build_markers(twin, cell, markers_rate)
-        _compare(path, twin, tap, step_ns, report, markers, spawns)
-    finally:
-        twin.stop()
+    rerun = _Rerun(cell, seed)
+    if rerun.twin.dt_ns != step_ns:
+        raise RecordingError(f'{path}: metadata step_ns {step_ns} differs from the step of '
+                             f'cell.yaml ({rerun.twin.dt_ns} ns)')
+    _schedule(path, rerun.twin, step_ns, report)
+    spawns = _spawns(path, cell, step_ns, report)
+    markers = _build_markers(rerun, cell, markers_rate)
+    _compare(path, rerun, namespace, step_ns, report, markers, spawns)
     return report
 
 
 def _schedule(path: str, twin: Any, step_ns: int, report: ResimReport) -> None:
-    book = twin.twin.commands
+    book = twin.commands
     for m in reader.read_messages(path, topics=[ACCEPTED_BELT_COMMANDS,
                                                 ACCEPTED_ACTUATOR_COMMANDS], linear=True):
         try:
@@ -247,14 +260,13 @@ def _spawns(path: str, cell: Any, step_ns: int,
     return calls
 
 
-def _build_markers(twin: Any, cell: Any, markers_rate: float) -> Dict[int, bytes]:
+def _build_markers(rerun: _Rerun, cell: Any, markers_rate: float) -> Dict[int, bytes]:
     """Build the MarkerArray of every due step on the stepping thread; return {stamp: bytes}."""
-    from conveyor_twin.ros.markers import CellMarkers
     built: Dict[int, bytes] = {}
     if markers_rate <= 0:
         return built
     every = max(1, round(1.0 / (markers_rate * cell.settings.step)))  # as ScaleNode
-    markers, stage = CellMarkers(cell), twin.micro_stage
+    markers, stage = CellMarkers(cell), rerun.micro
 
     def on_step(inp: Any, _commands: Any) -> None:
         if inp.step % every == 0:
@@ -264,27 +276,37 @@ def _build_markers(twin: Any, cell: Any, markers_rate: float) -> Dict[int, bytes
             while len(built) > 1000:
                 del built[next(iter(built))]
 
-    twin.twin.step_listeners.append(on_step)
+    rerun.twin.step_listeners.append(on_step)
     return built
 
 
-def _compare(path: str, twin: Any, tap: Any, step_ns: int, report: ResimReport,
+class _Collector:
+    """A frame sink keeping every message of the re-run by topic, numbered as recorded."""
+
+    def __init__(self, names: Dict[Any, str]) -> None:
+        self.names = names
+        self.produced: Dict[str, Deque[Tuple[int, bytes]]] = {}
+        self.counters: Counter = Counter()
+
+    def on_frame(self, frame: Any) -> None:
+        for topic, _, data in frame.messages():
+            name = self.names[topic]
+            self.counters[name] += 1
+            self.produced.setdefault(name, deque()).append((self.counters[name], data))
+
+
+def _compare(path: str, rerun: _Rerun, namespace: str, step_ns: int, report: ResimReport,
              markers: Dict[int, bytes],
              spawns: Dict[int, List[Tuple[int, Any, Any, Any]]]) -> None:
-    produced: Dict[str, Deque[Tuple[int, bytes]]] = {}
-    counters: Counter = Counter()
-
-    def sink(topic: str, data: bytes) -> None:
-        counters[topic] += 1
-        produced.setdefault(topic, deque()).append((counters[topic], data))
-
-    specs = tap(twin, sink, forward=False)
-    namespace = twin.coordinator.get_namespace()
+    specs = {resolve(t.name, namespace): t for t in STREAMS}
+    collector = _Collector({t: name for name, t in specs.items()})
+    produced = collector.produced
+    rerun.output.subscribe(collector)
     ignored = {t for t, s in specs.items() if s.name in NOT_COMPARED}
     accepted = {ACCEPTED_BELT_COMMANDS, ACCEPTED_ACTUATOR_COMMANDS, ACCEPTED_SPAWNS,
                 ACCEPTED_RESETS}
     ignored |= accepted
-    core = twin.twin
+    core = rerun.twin
     # a closed file is read through its index (CRCs checked: damage is an error, never a
     # silent skip); a killed one linearly, as recover() would
     for m in reader.read_messages(path, linear=not report.complete_source):
@@ -308,7 +330,7 @@ def _compare(path: str, twin: Any, tap: Any, step_ns: int, report: ResimReport,
             if queue or core.step_index > limit:
                 break
             for type_index, x, y, yaw in spawns.pop(core.step_index, ()):
-                twin.coordinator._spawn(type_index, x, y, yaw)
+                rerun.micro.spawn(type_index, x, y, yaw)
             core.step(1)
             report.steps = core.step_index
             for other in produced.values():  # keep memory bounded on topics not recorded

@@ -1,0 +1,162 @@
+"""The ROS interface of the twin, once: every stream, command and service as plain data.
+
+Each entry names the topic or service (relative, so a namespace moves it; ``/clock`` is
+absolute as simulators publish it), its type by full name (``pkg/msg/Type``), the QoS the
+twin offers (:class:`OfferedQos`, policy names as rmw spells them), how often it is emitted,
+how it is stamped and which stage of the twin produces it. No rclpy here: the nodes create
+their publishers, subscriptions and services from this table (:mod:`conveyor_twin.ros.endpoints`
+maps it to rclpy), the recorder declares its channels from it, readers pick their decoders by
+its type names, and a new sink (a viewer, a test harness) reads it to know what a
+:class:`~conveyor_twin.output.frame.Frame` carries.
+"""
+
+from dataclasses import dataclass
+import enum
+from typing import Dict, Tuple
+
+#: Steps between two ``diagnostics`` messages (1 Hz of simulation time at a 1 ms step).
+DIAGNOSTICS_PERIOD_STEPS = 1000
+
+
+@dataclass(frozen=True)
+class OfferedQos:
+    """One QoS profile (policy names as rmw's ``*_to_str`` spells them; durations infinite).
+
+    :param depth: history depth [messages].
+    """
+
+    history: str = 'keep_last'
+    depth: int = 100
+    reliability: str = 'reliable'
+    durability: str = 'volatile'
+    liveliness: str = 'automatic'
+
+
+#: Every-step streams: reliable, keep-last 100, so best-effort and reliable subscribers can both
+#: attach and a subscriber in another process loses nothing at 1 kHz.
+STREAM_QOS = OfferedQos()
+#: Light-barrier edges: reliable with a deeper history.
+EDGE_QOS = OfferedQos(depth=1000)
+#: ``/clock`` as simulators publish it (rclcpp::ClockQoS): best effort, keep-last 1.
+CLOCK_QOS = OfferedQos(depth=1, reliability='best_effort')
+#: Commands from controllers.
+COMMAND_QOS = OfferedQos(depth=100)
+#: Diagnostics (1 Hz) and markers (viewer rate).
+SLOW_QOS = OfferedQos(depth=10)
+
+
+class Kind(str, enum.Enum):
+    """Direction of an entry: what the twin emits, takes, or serves."""
+
+    STREAM = 'stream'
+    COMMAND = 'command'
+    SERVICE = 'service'
+
+
+class Stamp(str, enum.Enum):
+    """Where the simulation time of a message is.
+
+    ``HEADER``: ``header.stamp`` (the step's time; an edge's interpolated time);
+    ``CLOCK``: the message is the time (``rosgraph_msgs/Clock``); ``NONE``: no time.
+    Both stamped kinds carry it as the first field, so it is the first 8 payload bytes.
+    """
+
+    HEADER = 'header'
+    CLOCK = 'clock'
+    NONE = ''
+
+
+class Rate(str, enum.Enum):
+    """How often a stream is emitted."""
+
+    STEP = 'every step'
+    EDGE = 'on each change'
+    DIAGNOSTICS = 'every DIAGNOSTICS_PERIOD_STEPS steps'
+    VIEWER = 'viewer rate (markers_rate), built off the stepping thread'
+    ON_DEMAND = 'when a controller sends or calls'
+
+
+class Producer(str, enum.Enum):
+    """The stage (and, split, the process) that produces a stream or serves an entry."""
+
+    COORDINATOR = 'coordinator'
+    MICRO = 'micro'
+    MACRO = 'macro'
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One entry of the contract.
+
+    :param name: relative topic or service name (``/clock`` absolute).
+    :param type_name: full type name, ``pkg/msg/Type`` (services ``pkg/srv/Type``).
+    :param kind: stream (out), command (in) or service.
+    :param qos: the QoS the twin offers (streams) or subscribes with (commands).
+    :param rate: how often it is emitted.
+    :param stamp: where its simulation time is.
+    :param producer: the stage that produces it (streams) or takes it (commands, services).
+    :param default: recorded by default (``markers`` is opt-in: viewer data).
+    """
+
+    name: str
+    type_name: str
+    kind: Kind
+    qos: OfferedQos
+    rate: Rate
+    stamp: Stamp
+    producer: Producer
+    default: bool = True
+
+    @property
+    def command(self) -> bool:
+        """True for an input of the twin (a replay publishing it drives a live twin)."""
+        return self.kind is Kind.COMMAND
+
+
+_MSGS = 'conveyor_twin_msgs/msg/'
+_SRVS = 'conveyor_twin_msgs/srv/'
+_S, _C, _V = Kind.STREAM, Kind.COMMAND, Kind.SERVICE
+_COORD, _MICRO, _MACRO = Producer.COORDINATOR, Producer.MICRO, Producer.MACRO
+
+PARTS = Topic('parts', _MSGS + 'PartStates', _S, STREAM_QOS, Rate.STEP, Stamp.HEADER, _MICRO)
+DENSITY = Topic('density', _MSGS + 'DensityGrid', _S, STREAM_QOS, Rate.STEP, Stamp.HEADER,
+                _MACRO)
+LIGHT_BARRIERS = Topic('light_barriers', _MSGS + 'LightBarrierStates', _S, STREAM_QOS,
+                       Rate.STEP, Stamp.HEADER, _MICRO)
+LIGHT_BARRIER_EDGES = Topic('light_barrier_edges', _MSGS + 'LightBarrierEdge', _S, EDGE_QOS,
+                            Rate.EDGE, Stamp.HEADER, _MICRO)
+BELT_STATES = Topic('belt_states', _MSGS + 'BeltStates', _S, STREAM_QOS, Rate.STEP,
+                    Stamp.HEADER, _COORD)
+ACTUATOR_STATES = Topic('actuator_states', _MSGS + 'ActuatorStates', _S, STREAM_QOS, Rate.STEP,
+                        Stamp.HEADER, _COORD)
+CLOCK = Topic('/clock', 'rosgraph_msgs/msg/Clock', _S, CLOCK_QOS, Rate.STEP, Stamp.CLOCK,
+              _COORD)
+DIAGNOSTICS = Topic('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', _S, SLOW_QOS,
+                    Rate.DIAGNOSTICS, Stamp.HEADER, _COORD)
+MARKERS = Topic('markers', 'visualization_msgs/msg/MarkerArray', _S, SLOW_QOS, Rate.VIEWER,
+                Stamp.NONE, _MICRO, default=False)
+BELT_COMMAND = Topic('belt_command', _MSGS + 'BeltCommand', _C, COMMAND_QOS, Rate.ON_DEMAND,
+                     Stamp.NONE, _COORD)
+ACTUATOR_COMMAND = Topic('actuator_command', _MSGS + 'ActuatorCommand', _C, COMMAND_QOS,
+                         Rate.ON_DEMAND, Stamp.NONE, _COORD)
+STEP = Topic('step', _SRVS + 'Step', _V, COMMAND_QOS, Rate.ON_DEMAND, Stamp.NONE, _COORD)
+RESET = Topic('reset', _SRVS + 'Reset', _V, COMMAND_QOS, Rate.ON_DEMAND, Stamp.NONE, _COORD)
+SPAWN_PARTS = Topic('spawn_parts', _SRVS + 'SpawnParts', _V, COMMAND_QOS, Rate.ON_DEMAND,
+                    Stamp.NONE, _COORD)
+
+#: Every stream the twin emits.
+STREAMS: Tuple[Topic, ...] = (PARTS, DENSITY, LIGHT_BARRIERS, LIGHT_BARRIER_EDGES, BELT_STATES,
+                              ACTUATOR_STATES, CLOCK, DIAGNOSTICS, MARKERS)
+#: Every command topic the twin subscribes to.
+COMMANDS: Tuple[Topic, ...] = (BELT_COMMAND, ACTUATOR_COMMAND)
+#: Every service the twin serves.
+SERVICES: Tuple[Topic, ...] = (STEP, RESET, SPAWN_PARTS)
+#: Topics (streams and commands) by name, as written above.
+TOPICS: Dict[str, Topic] = {t.name: t for t in STREAMS + COMMANDS}
+#: Every entry of the contract by name.
+CONTRACT: Dict[str, Topic] = {t.name: t for t in STREAMS + COMMANDS + SERVICES}
+
+
+def produced_by(producer: Producer) -> Tuple[Topic, ...]:
+    """Return the streams a stage produces (what its process's frames carry)."""
+    return tuple(t for t in STREAMS if t.producer is producer)

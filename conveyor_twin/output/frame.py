@@ -1,0 +1,101 @@
+"""The frame: what the twin emitted in one step, every contract stream as CDR bytes.
+
+A :class:`Frame` holds, for the step just taken, the CDR bytes (with the 4-byte encapsulation
+header, as a ROS publisher sends them) of every stream of :mod:`conveyor_twin.contract` that
+the stages in this process produce, the accepted commands that took effect at the step and,
+on diagnostics steps, the diagnostics. Streams stamped with the step carry ``time_ns``; each
+light-barrier edge carries its own interpolated time. A stream not produced in this process
+(split layout: the micro process has no ``/clock``) is ``None`` or empty.
+
+The twin builds one frame per step and hands the same object to every sink
+(:class:`~conveyor_twin.output.hub.TwinOutput`); the object is reused the next step, so a sink
+that keeps data beyond :meth:`on_frame <FrameSink.on_frame>` keeps the bytes (immutable) or a
+:meth:`Frame.copy`, never the frame.
+"""
+
+from typing import Iterator, List, Optional, Protocol, Sequence, Tuple
+
+from conveyor_twin import contract
+from conveyor_twin.contract import Topic
+
+#: The streams of a frame in the order :meth:`Frame.messages` yields them.
+FRAME_STREAMS: Tuple[Topic, ...] = (
+    contract.CLOCK, contract.BELT_STATES, contract.ACTUATOR_STATES, contract.DIAGNOSTICS,
+    contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES, contract.DENSITY)
+
+
+class Frame:
+    """The output of one step (attributes are set by the producers, read by the sinks).
+
+    :ivar step: step index (the state after it) [1].
+    :ivar time_ns: simulation time of the step [ns]; the stamp of every stream but the edges.
+    :ivar input: the step's :class:`~conveyor_twin.coord.step_input.StepInput` (actual belt
+        speeds [m/s] and actuator positions [m or rad] every stage advanced with).
+    :ivar commands: accepted :class:`~conveyor_twin.coord.commands.Command` objects that took
+        effect at this step, in order (coordinator's part).
+    :ivar clock: ``rosgraph_msgs/Clock`` CDR (coordinator).
+    :ivar belt_states: ``BeltStates`` CDR (coordinator).
+    :ivar actuator_states: ``ActuatorStates`` CDR (coordinator).
+    :ivar diagnostics: ``DiagnosticArray`` CDR on diagnostics steps, else None (coordinator).
+    :ivar parts: ``PartStates`` CDR (micro).
+    :ivar light_barriers: ``LightBarrierStates`` CDR (micro).
+    :ivar edges: ``(stamp [ns], LightBarrierEdge CDR)`` of every edge of the step (micro).
+    :ivar density: one ``DensityGrid`` CDR per macro zone, in the cell's zone order (macro).
+    """
+
+    __slots__ = ('step', 'time_ns', 'input', 'commands', 'clock', 'belt_states', 'actuator_states',
+                 'diagnostics', 'parts', 'light_barriers', 'edges', 'density')
+
+    def __init__(self) -> None:
+        self.step = 0
+        self.time_ns = 0
+        self.input = None
+        self.commands: Sequence = ()
+        self.clock: Optional[bytes] = None
+        self.belt_states: Optional[bytes] = None
+        self.actuator_states: Optional[bytes] = None
+        self.diagnostics: Optional[bytes] = None
+        self.parts: Optional[bytes] = None
+        self.light_barriers: Optional[bytes] = None
+        self.edges: Sequence[Tuple[int, bytes]] = ()
+        self.density: List[bytes] = []
+
+    def messages(self) -> Iterator[Tuple[Topic, int, bytes]]:
+        """Yield (contract topic, stamp [ns], CDR bytes) of every message of the frame, in the
+        order of :data:`FRAME_STREAMS` (edges and density zones in their order)."""
+        t = self.time_ns
+        for topic, data in ((contract.CLOCK, self.clock),
+                            (contract.BELT_STATES, self.belt_states),
+                            (contract.ACTUATOR_STATES, self.actuator_states),
+                            (contract.DIAGNOSTICS, self.diagnostics),
+                            (contract.PARTS, self.parts),
+                            (contract.LIGHT_BARRIERS, self.light_barriers)):
+            if data is not None:
+                yield topic, t, data
+        for stamp, data in self.edges:
+            yield contract.LIGHT_BARRIER_EDGES, stamp, data
+        for data in self.density:
+            yield contract.DENSITY, t, data
+
+    def copy(self) -> 'Frame':
+        """Return a frame with the same bytes that the next step does not overwrite."""
+        other = Frame()
+        for name in self.__slots__:
+            setattr(other, name, getattr(self, name))
+        other.commands = tuple(self.commands)
+        other.edges = tuple(self.edges)
+        other.density = list(self.density)
+        return other
+
+
+class FrameSink(Protocol):
+    """Something that takes the twin's frames (a ROS publisher, the recorder, a viewer).
+
+    :meth:`on_frame` runs on the stepping thread: it must return quickly and never block
+    (hand slow work to :class:`~conveyor_twin.output.queued.QueuedSink`). A sink may also
+    define ``on_message(topic, stamp_ns, data)`` for what the twin emits off the step
+    (``markers``, built at viewer rate on a thread of their own).
+    """
+
+    def on_frame(self, frame: Frame) -> None:
+        """Take the frame of the step just taken (valid during this call only)."""

@@ -1,0 +1,81 @@
+"""The twin's output: builds one frame per step and hands it to every sink.
+
+:class:`TwinOutput` is a step listener of the coordinator core
+(``twin.step_listeners.append(output.on_step)``) or, in a split scale process, is called by
+the node when its step is done. Each step it lets its producers (the stages of this process)
+write the frame, then calls every subscribed sink's ``on_frame`` in subscription order, on the
+stepping thread. Sinks are the ROS publishers of the nodes, the in-process recorder,
+re-simulation, a viewer or a test harness; none of them is known to the cores.
+"""
+
+import threading
+from typing import Any, Callable, Optional, Sequence, Tuple
+
+from conveyor_twin.contract import Topic
+from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.output.frame import Frame, FrameSink
+from conveyor_twin.output.producers import FrameProducer
+
+
+class TwinOutput:
+    """One frame per step from ``producers``, handed to every subscribed sink.
+
+    :param producers: the frame parts built in this process, in frame order (coordinator,
+        micro, macro).
+    """
+
+    def __init__(self, producers: Sequence[FrameProducer]) -> None:
+        self.producers: Tuple[FrameProducer, ...] = tuple(producers)
+        self.frame = Frame()
+        self._lock = threading.Lock()
+        self._sinks: Tuple[Any, ...] = ()
+        self._on_frame: Tuple[Callable[[Frame], None], ...] = ()
+        self._on_message: Tuple[Callable[[Topic, int, bytes], None], ...] = ()
+
+    def subscribe(self, sink: FrameSink) -> None:
+        """Hand every following frame to ``sink.on_frame`` (and off-step messages to its
+        ``on_message``, if it has one). Safe while the twin steps: from the next step on."""
+        with self._lock:
+            self._set(self._sinks + (sink,))
+
+    def unsubscribe(self, sink: FrameSink) -> None:
+        """Stop handing frames to ``sink`` (no error if it is not subscribed)."""
+        with self._lock:
+            self._set(tuple(s for s in self._sinks if s is not sink))
+
+    def _set(self, sinks: Tuple[Any, ...]) -> None:
+        self._sinks = sinks
+        on_message = tuple(s.on_message for s in sinks if hasattr(s, 'on_message'))
+        # one assignment each: the stepping thread reads whole tuples
+        self._on_frame = tuple(s.on_frame for s in sinks)
+        self._on_message = on_message
+
+    @property
+    def sinks(self) -> Tuple[Any, ...]:
+        """The subscribed sinks, in order."""
+        return self._sinks
+
+    def on_step(self, inp: StepInput, commands: Sequence = ()) -> Frame:
+        """Build the frame of the step just taken and hand it to every sink; return it.
+
+        :param inp: the step's input (step index, time, actuation).
+        :param commands: accepted commands that took effect at the step.
+        """
+        frame = self.frame
+        frame.step = inp.step
+        frame.time_ns = inp.time_ns
+        frame.input = inp
+        for producer in self.producers:
+            producer.fill(frame, inp, commands)
+        for on_frame in self._on_frame:
+            on_frame(frame)
+        return frame
+
+    def emit(self, topic: Topic, data: bytes, stamp_ns: Optional[int] = None) -> None:
+        """Hand a message emitted off the step (``markers``) to the sinks' ``on_message``.
+
+        :param stamp_ns: its simulation time [ns]; None: the time of the latest frame.
+        """
+        stamp = self.frame.time_ns if stamp_ns is None else stamp_ns
+        for on_message in self._on_message:
+            on_message(topic, stamp, data)

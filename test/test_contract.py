@@ -1,0 +1,84 @@
+"""The contract table against msg_defs/, the schemas the recorder writes and the design's list."""
+
+import pathlib
+
+import pytest
+
+from conveyor_twin import contract
+from conveyor_twin.contract import Kind, Producer, Rate, Stamp
+from conveyor_twin.output.frame import FRAME_STREAMS
+from conveyor_twin.wire import schemas
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+MSG_DEFS = ROOT / 'msg_defs'
+# the ROS interface as the design lists it (name, type, direction)
+INTERFACE = {
+    'parts': ('PartStates', Kind.STREAM), 'density': ('DensityGrid', Kind.STREAM),
+    'light_barriers': ('LightBarrierStates', Kind.STREAM),
+    'light_barrier_edges': ('LightBarrierEdge', Kind.STREAM),
+    'belt_states': ('BeltStates', Kind.STREAM), 'actuator_states': ('ActuatorStates', Kind.STREAM),
+    '/clock': ('Clock', Kind.STREAM), 'diagnostics': ('DiagnosticArray', Kind.STREAM),
+    'belt_command': ('BeltCommand', Kind.COMMAND),
+    'actuator_command': ('ActuatorCommand', Kind.COMMAND),
+    'step': ('Step', Kind.SERVICE), 'reset': ('Reset', Kind.SERVICE),
+    'spawn_parts': ('SpawnParts', Kind.SERVICE),
+}
+
+
+def test_every_interface_entry_is_in_the_table_once():
+    entries = contract.STREAMS + contract.COMMANDS + contract.SERVICES
+    assert len({t.name for t in entries}) == len(entries)
+    # markers are the one stream beyond the design's list (viewer data, not recorded by default)
+    assert set(contract.CONTRACT) == set(INTERFACE) | {'markers'}
+    for name, (short, kind) in INTERFACE.items():
+        topic = contract.CONTRACT[name]
+        assert topic.type_name.split('/')[-1] == short and topic.kind is kind, name
+    assert not contract.MARKERS.default and all(
+        t.default for t in contract.STREAMS + contract.COMMANDS if t is not contract.MARKERS)
+
+
+@pytest.mark.parametrize('topic', contract.STREAMS + contract.COMMANDS, ids=lambda t: t.name)
+def test_every_topic_type_has_a_schema_with_the_fields_of_msg_defs(topic):
+    assert topic.type_name in schemas.SCHEMAS
+    package, _, name = topic.type_name.split('/')
+    if package != 'conveyor_twin_msgs':
+        return
+    path = MSG_DEFS / 'msg' / f'{name}.msg'
+    expected = [(f.name, f.base, f.array)
+                for f in schemas.parse_fields(topic.type_name, path.read_text())]
+    got = [(f.name, f.base, f.array)
+           for f in schemas.parse_fields(topic.type_name, schemas.MSG_TEXTS[topic.type_name])]
+    assert got == expected
+    if topic.stamp is Stamp.HEADER:  # the stamp is the first 8 bytes of the payload
+        assert expected[0][:2] == ('header', 'std_msgs/msg/Header')
+
+
+def test_every_interface_file_is_in_the_table():
+    in_table = {t.type_name for t in contract.CONTRACT.values()}
+    for path in sorted((MSG_DEFS / 'msg').glob('*.msg')):
+        assert f'conveyor_twin_msgs/msg/{path.stem}' in in_table, path.name
+    for path in sorted((MSG_DEFS / 'srv').glob('*.srv')):
+        assert f'conveyor_twin_msgs/srv/{path.stem}' in in_table, path.name
+    for service in contract.SERVICES:
+        assert (MSG_DEFS / 'srv' / (service.type_name.split('/')[-1] + '.srv')).is_file()
+
+
+def test_qos_rates_stamps_and_producers():
+    every_step = ('parts', 'density', 'light_barriers', 'belt_states', 'actuator_states')
+    for name in every_step:
+        topic = contract.TOPICS[name]
+        assert topic.rate is Rate.STEP and topic.stamp is Stamp.HEADER
+        assert (topic.qos.reliability, topic.qos.history, topic.qos.depth) == \
+            ('reliable', 'keep_last', 100)
+    edges = contract.LIGHT_BARRIER_EDGES
+    assert edges.qos.reliability == 'reliable' and edges.qos.depth > 100
+    clock = contract.CLOCK
+    assert (clock.qos.reliability, clock.qos.depth, clock.stamp) == ('best_effort', 1,
+                                                                     Stamp.CLOCK)
+    assert contract.DIAGNOSTICS.rate is Rate.DIAGNOSTICS
+    assert all(t.stamp is Stamp.NONE for t in contract.COMMANDS)
+    # every stream but markers is in the frame, and each stage's part is what it produces
+    assert set(FRAME_STREAMS) == set(contract.STREAMS) - {contract.MARKERS}
+    assert contract.produced_by(Producer.MACRO) == (contract.DENSITY,)
+    assert set(contract.produced_by(Producer.MICRO)) == {
+        contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES, contract.MARKERS}
