@@ -10,16 +10,18 @@ setup(
     name=PACKAGE_NAME,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
-    # Files read at run time through importlib.resources (the embedded default cell) and the
-    # PEP 561 marker.
+    # Files read at run time through importlib.resources (the embedded default cell), the example
+    # cells and the PEP 561 marker.
     package_data={
         PACKAGE_NAME: ['py.typed'],
-        f'{PACKAGE_NAME}.cell': ['*.yaml'],
+        f'{PACKAGE_NAME}.cell': ['*.yaml', 'examples/*.yaml'],
     },
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE_NAME}']),
         (f'share/{PACKAGE_NAME}', ['package.xml']),
         (f'share/{PACKAGE_NAME}/cells', sorted(glob(f'{PACKAGE_NAME}/cell/*.yaml'))),
+        (f'share/{PACKAGE_NAME}/cells/examples',
+         sorted(glob(f'{PACKAGE_NAME}/cell/examples/*.yaml'))),
     ],
     install_requires=['setuptools'],
     zip_safe=False,

@@ -11,46 +11,18 @@ advection (classic solver, dimensional splitting, first order) when clawpack is 
 Rows ``*_free``: the same belt without the deflector (free flow, nothing reaches rho_max):
 plain capped advection, and the Göttlich variant with its operator idle.
 
-Measured here (2 cores shared with other engineers, numba 0.68, NumPy 2.4): medians per 1 ms
-step, one substep each, ``--steps`` 2000 on 400 x 100 (100 on 2000 x 500); the jam grows while
-it is timed (to 2600-2900 cells at rho_max on 400 x 100, 6.5-7 % of the grid; 11000-12000 on
-2000 x 500). Old = the kernels before the work-skipping (commit 881feb0), new = these, run
-side by side in one process (blocks of 100 steps, resp. 10, alternating; ``state_bytes()``
-identical after every block); two 400 x 100 runs at load average 2.3-3.0, one 2000 x 500 run
-at 1.9-3.3:
-
-======================  ===========================  ===========================
-case                    400 x 100 old -> new         2000 x 500 old -> new
-======================  ===========================  ===========================
-capped upwind, jam      0.310-0.314 -> 0.133 ms      14.5 -> 6.5 ms
-capped limited, jam     0.55-0.60 -> 0.30-0.33 ms    34.1 -> 14.8 ms
-goettlich upwind, jam   0.50-0.55 -> 0.24-0.28 ms    8.2 -> 4.4 ms
-goettlich limited, jam  0.66-0.89 -> 0.40-0.52 ms    25.1 -> 10.6 ms
-capped upwind, free     0.14-0.19 -> 0.07-0.10 ms    6.3 -> 2.4 ms
-goettlich upwind, free  0.15-0.21 -> 0.08-0.11 ms    4.2 -> 2.1 ms
-NumPy upwind            0.48-0.50 ms                 16.6 ms
-======================  ===========================  ===========================
-
-New / old: 1.7-2.4x in every case. The targets on 400 x 100 (capped upwind <= 0.15 ms, full
-Göttlich upwind <= 0.3 ms) are met in the jam at this load, with little margin (~10 % for
-both at the slower run). Where the time went: the y sweep worked on every face although a
-belt along x has y velocity only in the sliding layers (now it works only on faces with y
-velocity and the operator's faces); the x cut visited every face upstream of the last
-overflowing cell (now only faces whose cut condition holds, found by a branch-free pass,
-and the chains upstream of them); the collision operator's mollifier ran tap-inner loops
-with branches over a region grown by 2 r + 3 cells (now vectorised tap-outer loops over
-r + 1 cells, its second pass only where operator faces read it, branch-free operator faces
-and full-row ranges); the capped pre-check's index reductions were 64-bit (no AVX2
-min/max). What remains in the capped upwind jam step (thread CPU, isolated kernels): x
-sweep demand and update ~35 us, the x pre-check ~20 us, cuts ~8 us, y sweep ~10 us, the
-Python wrapper ~9-15 us; the operator adds ~30-140 us as the jam grows (100-2600 full
-cells).
+Figures and the machine they were measured on: docs/benchmarks.md. Where the time goes in the
+capped upwind jam step on 400 x 100 (thread CPU, isolated kernels): x sweep demand and update
+~35 us, the x pre-check ~20 us, cuts ~8 us, y sweep ~10 us, the Python wrapper ~9-15 us; the
+operator adds ~30-140 us as the jam grows (100-2600 full cells). The y sweep works only on faces
+with a y velocity and the operator's faces, the x cut only on faces whose cut condition holds,
+the collision operator only within r + 1 cells of full cells.
 
 Ratios NumPy / numba in the same run (``conveyor-twin bench macro``, load 2.6-2.8): free
 capped upwind 4.8x, capped upwind in the jam 3.7x, Göttlich upwind in the jam 1.75x (NumPy's
-step has no cap, no operator and no bookkeeping). PyClaw could not be installed on this
-machine (clawpack builds its Fortran kernels with meson and no gfortran is present), so its
-ratio is reported as skipped.
+step has no cap, no operator and no bookkeeping). PyClaw needs clawpack, whose Fortran kernels
+are built with gfortran at install time (docs/benchmarks.md); without it its rows are reported
+as skipped.
 """
 
 import argparse

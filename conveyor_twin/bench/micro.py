@@ -12,23 +12,23 @@ its belt drive is applied each step with ``pymunk.batch`` and numpy (no per-body
 ``pymunk step`` times ``space.step`` alone; ``pymunk total`` adds the drive. The ratios are
 pymunk / ours; ``x step`` (against ``space.step`` alone) is the conservative one.
 
-The second part reproduces seed 000's claim (impulses stable at 1e-3 s, a force-based response
+The second part reproduces Hoher et al.'s claim (impulses stable at 1e-3 s, a force-based response
 needing ~1e-6 s, ~1000x) on the same scene, one step per step (no automatic substeps), by two
 criteria: *stable* in the jam (N discs, 0.3 s: deepest penetration below 10 % of the radius,
 no part faster than twice the belt, none through a wall) and *accurate* on one impact (two
 scene discs head on at the belt speed: restitution within :data:`IMPACT_TOLERANCE` = 10 % of
 its step -> 0 value; the impulse model's is exact at any step). The penalty model runs at two
-stiffnesses: the one picked by activity (seed 001, springs <= 1 % of the least active physical
-element), and the stainless steel the seed's parts are made of (:func:`seed_stiffness`: line
+stiffnesses: the one picked by activity (Rideout and Stein, springs <= 1 % of the least active
+element), and the stainless steel the paper's parts are made of (:func:`seed_stiffness`: line
 contact of two 10 mm high parts, k = (pi / 4) E* L = 8.3e8 N/m), both with the damping ratio
-of the cell's penalty contact (0.11). Basis and assumptions: the seed's text names the
+of the cell's penalty contact (0.11). Basis and assumptions: the paper's text names the
 material and says the forces come from Young's moduli and intersection depths, but its parts'
 mass and diameter are lost in the extraction, so the scene's 10 g discs stand in; a lighter
 part (a hollow spacer) needs a smaller step (dt ~ sqrt(m)). At the steel stiffness the penalty
 model is *stable* up to 2e-6 s (500x) and *accurate* to 10 % only up to 1e-6 s (1000x, the
-seed's figure; the impact errors per step are printed: 20 % at 2e-6 s, 5 % at 1e-6 s, so a
-5 % tolerance would give 5e-7 s); seed 002's rule dt <= 1/(12 f) for a vibrating element
-gives 1.3e-6 s. So the seed's ~1e-6 s follows from steel stiffness plus resolving the contact
+paper's figure; the impact errors per step are printed: 20 % at 2e-6 s, 5 % at 1e-6 s, so a
+5 % tolerance would give 5e-7 s); Horváth et al.'s rule dt <= 1/(12 f) for a vibrating element
+gives 1.3e-6 s. So the paper's ~1e-6 s follows from steel stiffness plus resolving the contact
 oscillation (~12 steps per period), not from stability alone. At the activity-picked
 k = 1e5 N/m both criteria give 2e-4 s (5x): the activity-sized spring, far softer than steel,
 is what makes penalty contacts affordable.
@@ -49,17 +49,13 @@ N      ours median / mean [ms]       pymunk step median     pymunk / ours
 
 The means at N = 1000 are carried by preemption by other jobs (p99 0.57-4.3 ms, the
 scheduler's time slice); the thread-CPU median is 0.22-0.26 ms, the uncontended minimum
-~0.18 ms. Side by side with the previous kernel (same process, interleaved blocks, identical
-states bit for bit): medians 0.234 against 0.314 ms at N = 1000 (1.34x), 0.76 against 1.49 ms
-at N = 5000 (1.95x), 0.022 against 0.024 ms at N = 100; while the 1000 discs still move
-into the jam (list rebuilt every few steps) 1.16x; the default cell (113 parts in free flow)
-0.014 against 0.017 ms.
+~0.18 ms.
 Deepest overlap in the jam: 0.12 mm (N=100), 0.17 mm (N=1000), 0.39 mm (N=5000), slop 0.1 mm.
 Largest step, N = 100, 0.3 s: impulse 1e-3 s (2e-3 s overlaps 2.3 mm; impact exact);
 penalty at k = 1e5 N/m picked by activity (springs/least active physical element = 0.0046):
 stable 2e-4 s, accurate 2e-4 s (impact error 8.9 %; 5e-4 s: 500 %), 5x; penalty at the
 stainless-steel k = 8.3e8 N/m: stable 2e-6 s (5e-6 s blows up), accurate 1e-6 s (impact
-errors 20 % at 2e-6 s, 5.2 % at 1e-6 s), 1000x; seed 002's 1/(12 f): 1.3e-6 s.
+errors 20 % at 2e-6 s, 5.2 % at 1e-6 s), 1000x; Horváth et al.'s 1/(12 f): 1.3e-6 s.
 """
 
 import argparse
@@ -78,7 +74,7 @@ from conveyor_twin.cell.model import Cell
 from conveyor_twin.micro import MicroSim
 
 SCENE = Path(__file__).resolve().parent.parent / 'cell' / 'bench_micro.yaml'
-# Seed 000's parts: "small hollow and cylindrical spacers, made of stainless steel" (their mass
+# Hoher et al.'s parts: "small hollow and cylindrical spacers, made of stainless steel" (their mass
 # and diameter are lost in the extracted text); its force-based response takes the forces from
 # "the material features, like Young's moduli, and the intersection depths". Two such parts
 # standing side by side touch along a line as long as they are high; see seed_stiffness().
@@ -87,7 +83,7 @@ STEEL_NU = 0.29               # Poisson's ratio of stainless steel
 # Binary-impact accuracy: the restitution of a head-on impact of two scene discs may differ by
 # this fraction from its step -> 0 value (the impulse model's is exact at any step).
 IMPACT_TOLERANCE = 0.10
-# Seed 002: a vibrating element needs dt <= 1 / (12 f), about 12 steps per period.
+# Horváth et al.: a vibrating element needs dt <= 1 / (12 f), about 12 steps per period.
 STEPS_PER_PERIOD = 12
 DEFAULT_SIZES = (100, 1000, 5000)
 DEFAULT_STEPS = 2000
@@ -430,7 +426,7 @@ def main(argv: List[str]) -> int:
         report['penalty'] = largest_stable_step(
             args.stability_n, 'penalty', args.stability_time,
             penalty_stiffness=pick.stiffness, penalty_damping=pick.damping)
-        # the seed's material (stainless steel) stiffness, same damping ratio as the picked pair
+        # the paper's material (stainless steel) stiffness, same damping ratio as the picked pair
         k_seed = seed_stiffness(base)
         seed_damping = pick.damping * math.sqrt(k_seed / pick.stiffness)
         report['penalty_seed_stiffness'] = k_seed
@@ -469,7 +465,7 @@ def _print_stability(n: int, pick, report: Dict) -> None:
         print(f'  penalty k = {k:.3g} N/m ({name}): stable {report[key]["largest_step"]} s, '
               f'accurate {report[key + "_impact"]["largest_step"]} s (impact errors {errors}); '
               f'both {both} s, impulse/penalty {ratio}')
-    print(f"  seed 002's rule dt <= 1/(12 f) at the steel stiffness: "
+    print(f"  Horváth et al.'s rule dt <= 1/(12 f) at the steel stiffness: "
           f"{report['penalty_seed_rule_step']:.2g} s; activity ratio of the picked k "
           f'{pick.ratio:.3g}')
 

@@ -10,16 +10,12 @@ then the policy runs. Each case runs ``--warmup`` steps, then ``--steps`` timed 
 whole :class:`~conveyor_twin.coord.twin.Twin` (micro, macro, hand-over, ledger); the table
 gives median, p99 and mean per 1 ms step and the parts on the cell at the end.
 
-Measured here (2 shared cores, load average 1-3 from other jobs; three interleaved runs of the
-code before and after the hand-over speed-up, bit-identical results; medians of the runs'
-medians, p99 in brackets): multi-scale 5,000 parts 0.47 -> 0.23 ms (1.3 -> 0.56), 20,000
-parts 0.51 -> 0.30 ms (1.3 -> 0.59), 100,000 parts 0.67 -> 0.54 ms (1.4 -> 0.85) with ~1,070
-micro parts in the sensor windows; pure micro 5,000 parts 0.23 ms (0.77). So at 5,000 parts
-multi-scale now runs at about the speed of pure micro (1.0x, runs 0.75-1.2x; 0.48x before):
-free flow is cheap at the micro scale, and the multi-scale step still pays the macro solver
-over the whole 30 m grid (~0.06 ms) and ~5 hand-overs each way per step. At 100,000 parts the
-micro step of the ~1,000-1,600 parts at the sensor windows (~0.25 ms) and ~12 releases and
-captures per step (each release checked against all micro parts by ``place``) dominate.
+Figures and the machine they were measured on: docs/benchmarks.md. At 5,000 parts
+multi-scale runs at about the speed of pure micro: free flow is cheap at the micro scale, and
+the multi-scale step still pays the macro solver over the whole 30 m grid (~0.06 ms) and ~5
+hand-overs each way per step. At 100,000 parts the micro step of the ~1,000-1,600 parts at
+the sensor windows (~0.25 ms) and ~12 releases and captures per step (each release checked
+against all micro parts by ``place``) dominate.
 """
 
 import argparse

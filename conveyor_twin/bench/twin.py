@@ -20,7 +20,7 @@ Both readers keep 1000 samples per stream, so "lost" counts what the twin did no
 - overruns and step times from the twin's ``diagnostics`` (1 Hz) during the window, and the
   twin's closing summary.
 
-Targets (issue 5): 0 overruns, >= 999 Hz per stream, p99 <= 1.5 ms, no loss.
+Targets: 0 overruns, >= 999 Hz per stream, p99 <= 1.5 ms, no loss.
 """
 
 import argparse

@@ -456,7 +456,7 @@ def load_cell_text(text: str, source_file: str = '<memory>') -> Cell:
 
 
 def default_cell_text() -> str:
-    """Return the YAML text of the embedded default cell (the seed's test rig)."""
+    """Return the YAML text of the embedded default cell (Hoher et al.'s test rig)."""
     return resources.files('conveyor_twin.cell').joinpath(DEFAULT_CELL_NAME).read_text('utf-8')
 
 

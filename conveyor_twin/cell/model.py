@@ -111,7 +111,7 @@ class PartType:
     :param height: height above the belt [m] (light barriers see a part if beam height < height).
     :param mass: [kg]. :param inertia: about the vertical axis [kg m^2].
     :param restitution: part-part coefficient of restitution (the pair uses the mean).
-    :param friction_static: impact friction coefficient at zero tangential speed (seed 002).
+    :param friction_static: impact friction coefficient at zero tangential speed (Horváth et al.).
     :param friction_sliding: impact friction coefficient above ``friction_transition_speed``.
     :param friction_transition_speed: tangential speed [m/s] where sliding friction is reached.
     """
@@ -279,7 +279,7 @@ CONTACT_MODELS = ('impulse', 'penalty')
 class MicroModel:
     """Micro-scale parameters.
 
-    :param contact: ``impulse`` (seed 000) or ``penalty`` (spring-damper, seed 001).
+    :param contact: ``impulse`` (Hoher et al.) or ``penalty`` (spring-damper, Rideout and Stein).
     :param capacity: preallocated number of part slots.
     :param penetration_slop: penetration left uncorrected [m].
     :param penetration_correction: fraction of the remaining penetration removed per step, 0..1.
@@ -306,7 +306,7 @@ MACRO_SCHEMES = ('upwind', 'limited')
 class MacroModel:
     """Macro-scale parameters.
 
-    :param variant: ``capped`` (seed 000 flux) or ``goettlich`` (collision operator, 2014).
+    :param variant: ``capped`` (Hoher et al.'s flux) or ``goettlich`` (Göttlich et al. 2014).
     :param scheme: ``upwind`` (first order) or ``limited`` (second order, minmod-limited).
     :param rho_max: maximum density [parts/m^2]; 0 derives hexagonal packing of the first part
         type, ``1 / (2 sqrt(3) R^2)``.

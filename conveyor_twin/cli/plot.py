@@ -1,4 +1,4 @@
-"""``conveyor-twin plot FILE -o DIR``: PNG figures of a recording (as in seed 000's validation).
+"""``conveyor-twin plot FILE -o DIR``: PNG figures of a recording (as Hoher et al. validate).
 
 Figures (each only when the recording has the topic):
 

@@ -1,4 +1,4 @@
-"""Macro scale: part density on the belt as a conservation law (models.md section 3).
+"""Macro scale: part density on the belt as a conservation law (docs/models.md).
 
 No ROS imports. :class:`MacroSim` is the entry point; :mod:`.reference` is the plain NumPy
 reference the numba kernels are tested against.

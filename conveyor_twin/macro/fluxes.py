@@ -12,7 +12,7 @@ Scheme (LeVeque, *Finite Volume Methods for Hyperbolic Problems*, ch. 6 and 19):
   slope of the donor cell (second order where smooth, TVD; the Lax-Wendroff correction written
   as a reconstruction). Slopes are zero next to solid cells and at the domain edge.
 
-Capped flux (seed 000, ``rho v (1 - H(rho - rho_max))``), in supply/demand (Godunov) form: the
+Capped flux (Hoher et al., ``rho v (1 - H(rho - rho_max))``), in supply/demand (Godunov) form:
 donor sends ``a`` as above; the receiver accepts at most its free capacity in this substep,
 ``rho_max - rho_R + out_R``, where ``out_R`` is what the receiver itself sends on along the same
 direction in the same substep. Faces are visited downstream first (positive faces from the right

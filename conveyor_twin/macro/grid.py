@@ -10,7 +10,7 @@ conservation exact up to round-off:
 - ``uy[iy, ix]`` (``(ny + 1) x nx``): y velocity [m/s] on the face between rows ``iy - 1`` and
   ``iy``.
 
-Construction of the field (models.md section 3):
+Construction of the field (Hoher et al.; Göttlich et al. 2014):
 
 1. Cell-centre belt velocity: the speed of the belt whose rectangle holds the centre times its
    direction (later belts in the cell win where belts overlap; no belt: at rest).

@@ -1,9 +1,12 @@
 """MacroSim: the macro-scale material-flow PDE of one zone, stepped at the twin's step.
 
-``d rho/dt + div(rho (v(x) + I(rho))) = 0`` (models.md section 3) with ``rho`` in parts/m^2, solved
+``d rho/dt + div(rho (v(x) + I(rho))) = 0`` (docs/models.md) with ``rho`` in parts/m^2, solved
 by dimensional splitting with 1D finite-volume sweeps (:mod:`conveyor_twin.macro.fluxes`), either
-with the seed's capped flux (``capped``: no operator, receiver capacity cut) or with the
-collision operator of Göttlich et al. 2014 (``goettlich``: :mod:`conveyor_twin.macro.collision`).
+with the capped flux of Hoher et al. (``capped``: no operator, receiver capacity cut) or with the
+collision operator of Göttlich et al. (``goettlich``: :mod:`conveyor_twin.macro.collision`).
+Papers: S. Hoher et al., *System Dynamic Models and Real-time Simulation of Complex Material
+Flow Systems*; S. Göttlich et al., *Modeling, simulation and validation of material flow on
+conveyor belts* (Appl. Math. Modelling, 2014).
 
 Time stepping: one call ``step(n)`` advances ``n`` twin steps of ``cell.settings.step`` seconds,
 each split into ``nsub`` equal substeps with ``nsub = ceil(dt * s / (h * cfl))``; ``s`` is the
@@ -22,7 +25,7 @@ cut by the free capacity of the receiving cell in the capped variant; what enter
 Parameters (cell ``macro`` section; the values here are what the embedded cell gives):
 
 - ``rho_max``: 0 derives hexagonal packing of the first part type's footprint disc,
-  ``1 / (2 sqrt(3) R^2)`` = 11547 /m^2 for the seed's 10 mm spacers (a close-packed jam of
+  ``1 / (2 sqrt(3) R^2)`` = 11547 /m^2 for the default cell's 10 mm spacers (a close-packed jam of
   standing discs; the densest planar arrangement, 0.907 of the area covered).
 - ``epsilon`` (operator speed): it must exceed the largest belt speed, or the belt packs a
   jam faster than the operator can spread it; the cell default 0.5 m/s equals the rig's belt

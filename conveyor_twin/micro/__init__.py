@@ -1,4 +1,4 @@
-"""Micro scale: every part a planar rigid body on the belts (seed 000, section 3).
+"""Micro scale: every part a planar rigid body on the belts (Hoher et al., docs/models.md).
 
 :class:`~conveyor_twin.micro.sim.MicroSim` is the entry point; the kernels live in the other
 modules. Imports numpy and numba only (no ROS).

@@ -1,13 +1,15 @@
-"""Activity (seed 001) of the penalty contact model, and the stiffness picker.
+"""Activity (Rideout and Stein) of the penalty contact model, and the stiffness picker.
 
 The activity of an element over a run is ``A = integral |effort * flow| dt``, its absolute power
 integrated: contact springs ``|k d * d'|``, contact dampers ``|c u_n^2|``, contact friction
 ``|f_t u_t|``, belt friction ``|F * slip|`` and the part inertias ``|d(kinetic energy)/dt|``
 (summed per element class by :class:`~conveyor_twin.micro.sim.MicroSim` when tracking). The
-springs are parasitic: they stand in for rigid contacts. Seed 001 sizes such an element so its
-activity stays a small fraction (1 %) of the least active *physical* element's. Physical
-classes below 1 % of the total physical activity are left out of that minimum (the model
-reduction of seed 001 would drop them; e.g. the inertia of parts resting in a jam).
+springs are parasitic: they stand in for rigid contacts. G. Rideout and J. L. Stein (*An
+Energy-Based Approach to Parameterizing Parasitic Elements for Eliminating Derivative
+Causality*) size such an element so its activity stays a small fraction (1 %) of the least
+active *physical* element's. Physical classes below 1 % of the total physical activity are
+left out of that minimum (the model reduction of Rideout and Stein would drop them; e.g. the
+inertia of parts resting in a jam).
 
 Impacts put a fixed share of their energy through the springs whatever their stiffness, so the
 picker is meant for sustained contact (a jam): start it from settled positions.
@@ -95,12 +97,12 @@ def pick_contact_stiffness(cell: Cell, *, seed: int, duration: float,
                            stiffness: Optional[float] = None, max_trials: int = 8,
                            max_stiffness: float = 1e9) -> StiffnessPick:
     """Pick the softest contact stiffness whose springs' activity is <= ``fraction`` of the
-    least active physical element's (seed 001), raising it from ``stiffness`` (default: the
-    cell's) by the measured excess (the springs' activity falls about as 1/k).
+    least active physical element's (Rideout and Stein), raising it from ``stiffness``
+    (default: the cell's) by the measured excess (the springs' activity falls about as 1/k).
 
     The damping keeps the cell's damping ratio ``c / (2 sqrt(k m_eff))`` (springs first, then
-    damping, as seed 001 prefers). Each trial runs the cell for ``settle + duration`` [s] and
-    measures the last ``duration``.
+    damping, as Rideout and Stein prefer). Each trial runs the cell for ``settle + duration``
+    [s] and measures the last ``duration``.
     """
     k = float(stiffness or cell.micro.penalty_stiffness)
     m_eff = 0.5 * min(p.mass for p in cell.part_types)

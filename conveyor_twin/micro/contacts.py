@@ -1,10 +1,10 @@
-"""Contact response kernels: impulses (seed 000) or penalty spring-dampers (seed 001).
+"""Contact response kernels: impulses (Hoher et al.) or penalty spring-dampers (Rideout, Stein).
 
 Impulse model: one algebraic impulse per contact point, no iteration. With the relative
 velocity ``u`` of A against B at the contact and the unit normal ``n`` pointing to A:
 ``j = -(1 + e) u_n / (1/m_a + 1/m_b + (r_a x n)^2 / I_a + (r_b x n)^2 / I_b)`` when ``u_n < 0``;
 then a tangential impulse that would stop the sliding, clamped to ``mu(|u_t|) j`` (Coulomb,
-seed 002's speed-dependent coefficient: static at rest, sliding above the transition speed,
+Horváth et al.'s speed-dependent coefficient: static at rest, sliding above the transition speed,
 linear in between). Restitution acts only above :data:`RESTITUTION_THRESHOLD` so resting
 contacts (a part pressed on a wall by the belt) do not chatter. Overlap beyond the slop is
 removed by moving the bodies apart along ``n`` (in inverse-mass proportion) every substep.
@@ -13,7 +13,7 @@ Penalty model: a spring-damper per contact point, ``f_n = max(0, k d - c u_n)``,
 friction force ``min(mu f_n, |u_t| / (k_t dt))`` against the sliding (the second term stops it
 within one substep without reversing it); no position correction.
 
-Why two sweeps in the impulse model (``CONTACT_PASSES = 2`` in :mod:`.sim`), although the seed
+Why two sweeps in the impulse model (``CONTACT_PASSES = 2`` in :mod:`.sim`), although Hoher et al.
 solves each contact once: every contact is still one algebraic equation, solved a fixed number
 of times per substep (no iteration to a tolerance, so cost and result stay time-deterministic),
 but a single sweep does not hold a jam. The second sweep is a plastic shock-propagation sweep
@@ -61,7 +61,7 @@ MP_FLOOR_MU = 6       # friction coefficient off the belts
 MP_TRACK = 7          # 1.0: accumulate activities
 MP_COLUMNS = 8
 
-# --- activity slots [J] (seed 001: integral of |power| dt per element class) ---
+# --- activity slots [J] (Rideout and Stein: integral of |power| dt per element class) ---
 A_SPRING = 0
 A_DAMPER = 1
 A_CONTACT_FRICTION = 2
@@ -105,7 +105,7 @@ AS_COLUMNS = 14
 
 @njit(cache=True, inline='always')
 def friction_coefficient(mu_s, mu_k, v_t, speed):
-    """Return seed 002's friction coefficient at tangential ``speed`` [m/s]."""
+    """Return Horváth et al.'s friction coefficient at tangential ``speed`` [m/s]."""
     if speed >= v_t:
         return mu_k
     return mu_s + (mu_k - mu_s) * (speed / v_t)
@@ -688,7 +688,7 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp):
 def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc):
     """Apply the contacts' impulses in ``passes`` sweeps (canonical order).
 
-    The first sweep is the seed's response, with restitution. Further sweeps are plastic and
+    The first sweep is Hoher et al.'s response, with restitution. Further sweeps are plastic and
     touch only contacts still closing (so they change nothing for isolated impacts). With
     ``passes >= 2`` the last sweep is a shock-propagation sweep: of two parts the one further
     downstream (larger ``key``, its position along its belt's direction [m]) counts as fixed,

@@ -124,7 +124,7 @@ def _segments_cross(segs_a, segs_b) -> bool:
 
 
 def friction_ref(mu_s: float, mu_k: float, v_t: float, speed: float) -> float:
-    """Seed 002: static at rest, sliding from ``v_t`` on, linear in between."""
+    """Horváth et al.: static at rest, sliding from ``v_t`` on, linear in between."""
     return mu_k if speed >= v_t else mu_s + (mu_k - mu_s) * speed / v_t
 
 

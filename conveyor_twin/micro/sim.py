@@ -50,7 +50,7 @@ EVENT_CAPACITY = 4096
 PENALTY_OMEGA_DT = 0.5
 # Impulse model: sweeps over the contacts per substep (the first with restitution; the others
 # plastic, touching only contacts still closing: they matter only where contacts share bodies,
-# as in a jam). 1 is the seed's single pass; it does not hold a jam (discs overlap by up to a
+# as in a jam). 1 is Hoher et al.'s single pass; it does not hold a jam (discs overlap by up to a
 # diameter, see the contacts module's docstring), so 2.
 CONTACT_PASSES = 2
 # Neighbour list skin as a fraction of the smallest part radius: a part may move 0.49 of it
@@ -106,7 +106,7 @@ class MicroSim:
     :param seed: random seed of the sources (the run's seed).
     :param region: (x_min, y_min, x_max, y_max) [m] simulated here; parts whose centre leaves
         it go to the outbox (:meth:`drain_outbox`). ``None``: the whole cell.
-    :param track_activity: accumulate the element activities (seed 001); default: only for
+    :param track_activity: accumulate the element activities (Rideout and Stein); default: for
         the penalty model.
     :param auto_substeps: choose substeps for travel and penalty stability; ``False`` takes
         exactly one substep per step (to measure raw step limits).
@@ -425,7 +425,7 @@ class MicroSim:
         self.state.counters[C_EVENTS] = 0
         return events
 
-    # --- activity (seed 001) ---
+    # --- activity (Rideout and Stein) ---
     def activity(self) -> Dict[str, float]:
         """Return the activity ``integral |power| dt`` of each element class so far [J]."""
         a = self.acc

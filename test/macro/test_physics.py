@@ -106,7 +106,7 @@ def test_belt_reversal_moves_material_back_and_out_on_the_other_side():
 
 @pytest.mark.parametrize('variant', ['capped', 'goettlich'])
 def test_deflector_redirects_to_the_gap_and_passes_the_inflow(variant):
-    """The seed rig's deflector: material slides along it, leaves only through the gap."""
+    """The test rig's deflector (Hoher et al.): material slides along it, out through the gap."""
     deflector = Obstacle('d', 'deflector', ((2.75, 0.25), (3.1, -0.1)), thickness=0.01)
     cell = make_cell(region=(2.4, -0.25, 3.6, 0.25), variant=variant,
                      belts=[belt((0.0, 0.0), (6.0, 0.0), 0.5, U)], obstacles=[deflector])

@@ -1,4 +1,4 @@
-"""The deflector jam of issue 6's validation, run once per (scale, seed, perturbation) per process.
+"""The deflector jam of the scale validation, run once per (scale, seed, perturbation) per process.
 
 Default cell, 2400 spacers at 500 parts/s, one zone over the whole belt: ``micro`` for pure micro,
 ``auto`` for multi-scale (tiles 0.2 m on a 2 cm grid, to macro above 3000 parts/m^2, to micro
@@ -7,7 +7,7 @@ the belt speed). The macro collision operator is the default cell's (``epsilon``
 20000 steps of 1 ms. Each run records every light-barrier edge, and every 0.1 s the queue in
 front of the deflector and the parts out through the exit, measured the same way at both
 scales. ``test_validation.py`` and ``test_sensor_windows.py`` share the runs (a cache per
-process), and docs/scale_validation.md reports the same quantities over seeds 1..8.
+process), and docs/validation.md reports the same quantities over seeds 1..8.
 """
 
 import functools

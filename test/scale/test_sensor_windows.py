@@ -1,9 +1,9 @@
 """Light barriers in sensor windows: which edges multi-scale reproduces exactly, which only
-statistically (issue 6: "barrier edge counts in sensor windows identical in count").
+statistically ("barrier edge counts in sensor windows identical in count").
 
 The deflector jam of ``deflector_scenario.py``: barriers lb_infeed (x = 2.0, upstream of the
 jam), lb_after_deflector (x = 3.6) and lb_exit (x = 5.7), both fed by the jam's discharge
-through the deflector gap. Method and measurements: docs/scale_validation.md. In short:
+through the deflector gap. Method and measurements: docs/validation.md. In short:
 
 * lb_infeed sees the head of the flow (free ride on the belt) and the tail of the queue. The
   free flow from the source stays micro (``free_flow_slip``), so every part it sees is a pure

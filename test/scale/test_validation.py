@@ -1,4 +1,4 @@
-"""Scale coordination validated against pure micro on the default cell (issue 6).
+"""Scale coordination validated against pure micro on the default cell.
 
 Queue length, measured the same way at both scales: the parts whose centre lies in a box, i.e.
 the micro part centres in the box plus the integral of the macro density over the grid cells
@@ -23,12 +23,12 @@ pytestmark = pytest.mark.slow
 
 # Seeds of the ensembles compared (the jam's discharge is chaotic per seed at both scales: a
 # single seed's queue differs by up to 5 % between two pure micro runs perturbed in the 12th
-# digit, docs/scale_validation.md; over seeds 1..8 the peak agrees within 2.9 %, over 1..4
+# digit, docs/validation.md; over seeds 1..8 the peak agrees within 2.9 %, over 1..4
 # only within 4.5 %).
 SEEDS = tuple(range(1, 9))
 # Collision-operator speed [m/s] of the default cell: the Goettlich model's one free parameter,
 # chosen so the macro jam queues and discharges as the micro one (seeds 1..8 in
-# docs/scale_validation.md: queue mean -2.1 %, peak -2.9 %, mean exit time -0.3 %).
+# docs/validation.md: queue mean -2.1 %, peak -2.9 %, mean exit time -0.3 %).
 DEFLECTOR_EPSILON = 1.2
 
 
