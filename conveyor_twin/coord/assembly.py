@@ -153,4 +153,5 @@ def build_twin(cell: Cell, *, seed: int, layout: Layout = 'composed',
         side = MacroSide(macro, cell, 0, check=check_balance)
         return AssembledTwin(layout, cell, seed, macro=macro, coupling=side.coupling,
                              macro_side=side)
-    raise ValueError(f'unknown layout {layout!r} (allowed: {", ".join(LAYOUTS)})')
+    allowed = ', '.join(LAYOUTS)
+    raise ValueError(f'unknown layout {layout!r} (allowed: {allowed})')

@@ -22,7 +22,8 @@ class RequestRejected(ValueError):
 class SpawnRequest:
     """A checked ``spawn_parts`` request: parts of one type at finite poses.
 
-    :param type_index: wire index of the part type.
+    :param part_type: name of the part type.
+    :param type_index: its wire index in the cell.
     :param x: x of every part [m]. :param y: y [m]. :param yaw: yaw [rad].
     """
 

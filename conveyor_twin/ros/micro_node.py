@@ -71,7 +71,9 @@ class MicroNode(ScaleNode):
         self._side = side  # the scale hand-over's micro half (split layout, coupled cells)
         if self.remote and side is not None:
             self.open_exchange(coupling.MICRO_STATE_TOPIC, coupling.EDITS_TOPIC, self._on_edits)
-        self.output.subscribe(self)
+        self.output.subscribe(self.streams)
+        if self.markers_every:
+            self.output.subscribe(self)  # on_frame: hands the due markers' state over
         self.serve_coordinator()
 
     def exchange(self, inp: StepInput) -> None:
@@ -96,10 +98,9 @@ class MicroNode(ScaleNode):
         self.output.on_step(inp)
 
     def on_frame(self, frame: Frame) -> None:
-        """Publish the frame's parts, barrier states and edges; hand due markers' state to
-        the markers thread."""
-        self.streams.on_frame(frame)
-        if self.markers_every and frame.step % self.markers_every == 0:
+        """Hand the state of a step due for markers to the markers thread (the frame's
+        streams are published by :attr:`streams`, subscribed before)."""
+        if frame.step % self.markers_every == 0:
             _, part_type, x, y = self.stage.parts()[:4]
             # copies (a few us) here; the ~0.5 ms of building happens off the stepping thread
             self._markers_due = (frame.time_ns, part_type.copy(), x.copy(), y.copy(),

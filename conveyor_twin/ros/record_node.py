@@ -20,7 +20,6 @@ estimated from the smallest stamp spacing seen: what the transport lost).
 """
 
 import argparse
-import importlib
 import json
 import signal
 import sys
@@ -33,6 +32,7 @@ from rclpy.qos import QoSProfile
 from conveyor_twin.record import topics as contract
 from conveyor_twin.record.errors import RecordingError
 from conveyor_twin.record.writer import McapRecorder
+from conveyor_twin.ros import endpoints
 from conveyor_twin.ros.qos import to_rclpy
 
 #: Smallest history depth of the recorder's subscriptions [messages].
@@ -51,11 +51,10 @@ def message_class(type_name: str) -> Any:
 
     :raises RecordingError: if the interface package is not installed.
     """
-    package, kind, name = type_name.split('/')
     try:
-        return getattr(importlib.import_module(f'{package}.{kind}'), name)
-    except (ImportError, AttributeError) as err:
-        raise RecordingError(f'message type {type_name} is not available: {err}') from None
+        return endpoints.message_class(type_name)
+    except ImportError as err:
+        raise RecordingError(str(err)) from None
 
 
 def subscription_qos(offered: contract.OfferedQos) -> QoSProfile:

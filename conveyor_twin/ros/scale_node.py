@@ -21,9 +21,9 @@ DONE_MATCH_TIMEOUT = 10.0  # s the first reply waits for its writer to see the c
 class ScaleNode(Node):
     """A node that owns a scale stage and publishes its streams after every step.
 
-    Composed, the coordinator's step listener calls :meth:`publish_step`; split
-    (``remote=True``), the node subscribes to the coupling topic, advances its own stage with
-    each step input (:meth:`advance_remote`), publishes, and reports the step done
+    Composed, the node publishes its part of the twin's frames (a sink of the shared output);
+    split (``remote=True``), the node subscribes to the coupling topic, advances its own stage
+    with each step input (:meth:`advance_remote`), publishes, and reports the step done
     (:meth:`finish_step`). Nodes that hand parts over to the other scale first exchange bytes
     with it and finish the step later (a state machine: no callback waits for another); they
     serve the coordinator only once that exchange is matched (:meth:`peers_matched`).
@@ -96,7 +96,7 @@ class ScaleNode(Node):
                                  self._on_coupling, COUPLING_QOS, raw=True)
 
     def publish_step(self, inp: StepInput) -> None:
-        """Publish this scale's streams for the step just taken."""
+        """Split layout: build and publish this process's frame of the step just taken."""
         raise NotImplementedError
 
     def spawn_reply(self, body: bytes) -> bytes:

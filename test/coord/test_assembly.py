@@ -40,7 +40,7 @@ def test_composed_steps_micro_macro_then_the_coupling_built_with_both() -> None:
 def test_composed_publishes_the_barriers_of_macro_zones_from_the_density() -> None:
     built = build_twin(_macro_cell(), seed=1)
     assert [b.index for b in built.coupling.barriers] == [0]
-    built.step(3000)
+    built.step(8000)  # the first parts reach the beam (x = 2.0) after about 4 s
     macro_count = int(built.coupling.barriers[0].edge_count)
     assert macro_count > 0
     assert int(built.micro.barrier_edge_count()[0]) == macro_count
