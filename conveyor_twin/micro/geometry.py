@@ -15,9 +15,9 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from conveyor_twin.cell.model import Cell, Obstacle
-from conveyor_twin.micro.contacts import (SH_AX, SH_AY, SH_BX, SH_BY, SH_COLUMNS, SH_E, SH_MU,
-                                          SH_NV, SH_OFF, SH_R, SH_XMAX, SH_XMIN, SH_YMAX,
-                                          SH_YMIN)
+from conveyor_twin.micro.contacts.tables import (SH_AX, SH_AY, SH_BX, SH_BY, SH_COLUMNS, SH_E,
+                                                 SH_MU, SH_NV, SH_OFF, SH_R, SH_XMAX, SH_XMIN,
+                                                 SH_YMAX, SH_YMIN)
 
 # Most grid cells allowed; the cell size grows to stay below it.
 MAX_GRID_CELLS = 1 << 20

@@ -51,7 +51,7 @@ PENALTY_OMEGA_DT = 0.5
 # Impulse model: sweeps over the contacts per substep (the first with restitution; the others
 # plastic, touching only contacts still closing: they matter only where contacts share bodies,
 # as in a jam). 1 is the seed's single pass; it does not hold a jam (discs overlap by up to a
-# diameter, see the contacts module's docstring), so 2.
+# diameter, see the docstring of contacts.response), so 2.
 CONTACT_PASSES = 2
 # Neighbour list skin as a fraction of the smallest part radius: a part may move 0.49 of it
 # before the list is rebuilt (in a jam it lives for many steps; in free flow at 0.5 m/s with
@@ -169,7 +169,7 @@ class MicroSim:
         # obstacles and grid
         self.shapes, self.shape_verts, self.shape_owner = obstacle_shapes(cell.obstacles)
         bounds = world_bounds(cell, self.shapes, region)
-        # cells and static lists grown by the neighbour list's skin (contacts.update_pairs)
+        # cells and static lists grown by the neighbour list's skin (update_pairs)
         self.grid = build_grid(bounds, max_brad, self.cfg[CF_SKIN], self.shapes)
         cap = self.state.capacity
         self._cell_table = grid_table(self.grid.cells)
