@@ -11,13 +11,11 @@ activities, static shapes, actuators, contact records). The names below are re-e
 that ``from conveyor_twin.micro.contacts import ...`` names any of them.
 """
 
-from conveyor_twin.micro.contacts.broad_phase import (build_grid, grid_table, NB_BUILDS,
-                                                      NB_HEADER, NB_MOVE, NB_N, NB_PAIRS,
-                                                      NB_VALID, neighbour_arrays, update_pairs)
-from conveyor_twin.micro.contacts.narrow_phase import detect, part_shape, scratch
-from conveyor_twin.micro.contacts.response import (correct_positions, friction_coefficient,
-                                                   impulse_response, MODE_IMPULSE, MODE_PENALTY,
-                                                   penalty_force, penalty_forces,
-                                                   prepare_contacts, RESTITUTION_THRESHOLD,
-                                                   solve_impulses)
+from conveyor_twin.micro.contacts.broad_phase import (  # noqa: F401
+    build_grid, grid_table, NB_BUILDS, NB_HEADER, NB_MOVE, NB_N, NB_PAIRS, NB_VALID,
+    neighbour_arrays, update_pairs)
+from conveyor_twin.micro.contacts.narrow_phase import detect, part_shape, scratch  # noqa: F401
+from conveyor_twin.micro.contacts.response import (  # noqa: F401
+    correct_positions, friction_coefficient, impulse_response, MODE_IMPULSE, MODE_PENALTY,
+    penalty_force, penalty_forces, prepare_contacts, RESTITUTION_THRESHOLD, solve_impulses)
 from conveyor_twin.micro.contacts.tables import *  # noqa: F401,F403
