@@ -4,8 +4,9 @@ numba's ``cache=True`` keys a function's cached machine code on its own file onl
 whose callees live in other modules (``macro.solver.advance`` inlines ``macro.fluxes`` and
 ``macro.collision``; ``coord.handover`` calls ``micro.sources``) would keep running the old code
 after only the callees changed, e.g. after a ``git pull``. On import of ``conveyor_twin`` the
-sources of the kernel packages are hashed together; when the hash differs from the last
-import's, their cache files are removed and the new hash is stored.
+sources of the kernel packages (sub-packages included) are hashed together; when the hash
+differs from the last import's, their cache files (sub-packages' too) are removed and the new
+hash is stored.
 """
 
 import hashlib
@@ -21,8 +22,9 @@ def sources_digest() -> str:
     """Return the SHA-256 of the kernel packages' sources (names and bytes)."""
     digest = hashlib.sha256()
     for package in KERNEL_PACKAGES:
-        for path in sorted((_ROOT / package).glob('*.py')):
-            digest.update(f'{package}/{path.name}'.encode())
+        root = _ROOT / package
+        for path in sorted(root.rglob('*.py')):
+            digest.update(f'{package}/{path.relative_to(root).as_posix()}'.encode())
             digest.update(path.read_bytes())
     return digest.hexdigest()
 
@@ -38,10 +40,10 @@ def drop_stale_caches() -> None:
         pass
     try:
         for package in KERNEL_PACKAGES:
-            cache = _ROOT / package / '__pycache__'
-            for pattern in ('*.nbi', '*.nbc'):
-                for path in cache.glob(pattern):
-                    path.unlink(missing_ok=True)
+            for cache in (_ROOT / package).rglob('__pycache__'):
+                for pattern in ('*.nbi', '*.nbc'):
+                    for path in cache.glob(pattern):
+                        path.unlink(missing_ok=True)
         stamp_file.parent.mkdir(exist_ok=True)
         stamp_file.write_text(stamp)
     except OSError:

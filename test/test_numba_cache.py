@@ -28,3 +28,20 @@ def test_a_change_in_one_package_drops_the_caches_of_all(tmp_path, monkeypatch):
     (tmp_path / 'micro' / '__pycache__' / 'x.nbi').write_bytes(b'x')
     numba_cache.drop_stale_caches()  # the new sources are the stamp now
     assert _caches(tmp_path) == ['micro/__pycache__/x.nbi']
+
+
+def test_a_change_in_a_sub_package_drops_its_caches_and_the_others(tmp_path, monkeypatch):
+    monkeypatch.setattr(numba_cache, '_ROOT', tmp_path)
+    _tree(tmp_path)
+    sub = tmp_path / 'micro' / 'contacts'
+    (sub / '__pycache__').mkdir(parents=True)
+    (sub / 'response.py').write_text('# response\n')
+    numba_cache.drop_stale_caches()
+    (sub / '__pycache__' / 'response.solve-1.py311.nbi').write_bytes(b'x')
+    (tmp_path / 'macro' / '__pycache__' / 'solver.advance-70.py311.nbi').write_bytes(b'x')
+    numba_cache.drop_stale_caches()  # nothing changed: caches kept
+    assert (sub / '__pycache__' / 'response.solve-1.py311.nbi').exists()
+    (sub / 'response.py').write_text('# response, edited\n')
+    numba_cache.drop_stale_caches()
+    assert not (sub / '__pycache__' / 'response.solve-1.py311.nbi').exists()
+    assert _caches(tmp_path) == []

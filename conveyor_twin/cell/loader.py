@@ -14,9 +14,10 @@ import yaml
 
 from conveyor_twin.cell.errors import CellError
 from conveyor_twin.cell.model import (
-    ACTUATOR_KINDS, Actuator, AutoSwitch, Belt, Cell, CONTACT_MODELS, LightBarrier,
-    MACRO_SCHEMES, MACRO_VARIANTS, MacroModel, MicroModel, Obstacle, OBSTACLE_KINDS, PART_SHAPES,
-    PartType, Point, Rect, Settings, Sink, Source, SOURCE_PATTERNS, Zone, ZONE_POLICIES,
+    ACTUATOR_KINDS, Actuator, AutoSwitch, Belt, Cell, CONTACT_MODELS, ContactModel, LightBarrier,
+    MACRO_SCHEMES, MACRO_VARIANTS, MacroModel, MacroScheme, MacroVariant, MicroModel, Obstacle,
+    OBSTACLE_KINDS, ObstacleKind, PART_SHAPES, PartType, Point, Rect, Settings, Sink, Source,
+    SOURCE_PATTERNS, Zone, ZONE_POLICIES, ZonePolicy,
 )
 
 DEFAULT_CELL_NAME = 'default_cell.yaml'
@@ -192,12 +193,12 @@ def _is_convex_ccw(points: Tuple[Point, ...]) -> bool:
 
 def _obstacle(r: _Reader) -> Obstacle:
     name = r.string('name')
-    kind = r.string('kind', choices=OBSTACLE_KINDS)
+    kind = ObstacleKind(r.string('kind', choices=OBSTACLE_KINDS))
     thickness, radius = 0.0, 0.0
-    if kind == 'peg':
+    if kind == ObstacleKind.PEG:
         points = (r.point('center'),)
         radius = r.number('radius', low=0.0, high=10.0, low_open=True)
-    elif kind == 'polygon':
+    elif kind == ObstacleKind.POLYGON:
         points = r.points('points', 3)
         if not _is_convex_ccw(points):
             if _is_convex_ccw(tuple(reversed(points))):
@@ -211,7 +212,7 @@ def _obstacle(r: _Reader) -> Obstacle:
             if points[i] == points[i - 1]:
                 raise r.fail('points', [list(p) for p in points],
                              'a polyline with no zero-length segment')
-        thickness = r.number('thickness', 0.01 if kind == 'deflector' else 0.005,
+        thickness = r.number('thickness', 0.01 if kind == ObstacleKind.DEFLECTOR else 0.005,
                              low=0.0, high=1.0, low_open=True)
     obstacle = Obstacle(
         name=name, kind=kind, points=points, thickness=thickness, radius=radius,
@@ -333,7 +334,7 @@ def _actuator(r: _Reader) -> Actuator:
 
 def _zone(r: _Reader) -> Zone:
     name = r.string('name')
-    policy = r.string('policy', 'micro', choices=ZONE_POLICIES)
+    policy = ZonePolicy(r.string('policy', 'micro', choices=ZONE_POLICIES))
     region = r.rect('region')
     resolution = r.number('resolution', 0.01, low=0.0, high=1.0, low_open=True)
     a = r.section('auto')
@@ -353,7 +354,7 @@ def _zone(r: _Reader) -> Zone:
 
 def _micro(r: _Reader) -> MicroModel:
     model = MicroModel(
-        contact=r.string('contact', 'impulse', choices=CONTACT_MODELS),
+        contact=ContactModel(r.string('contact', 'impulse', choices=CONTACT_MODELS)),
         capacity=r.integer('capacity', 20000, low=1, high=10_000_000),
         penetration_slop=r.number('penetration_slop', 1e-4, low=0.0, high=0.01),
         penetration_correction=r.number('penetration_correction', 0.8, low=0.0, high=1.0),
@@ -368,8 +369,8 @@ def _micro(r: _Reader) -> MicroModel:
 
 def _macro(r: _Reader) -> MacroModel:
     model = MacroModel(
-        variant=r.string('variant', 'goettlich', choices=MACRO_VARIANTS),
-        scheme=r.string('scheme', 'upwind', choices=MACRO_SCHEMES),
+        variant=MacroVariant(r.string('variant', 'goettlich', choices=MACRO_VARIANTS)),
+        scheme=MacroScheme(r.string('scheme', 'upwind', choices=MACRO_SCHEMES)),
         rho_max=r.number('rho_max', 0.0, low=0.0),
         epsilon=r.number('epsilon', 0.5, low=0.0),
         mollifier_width=r.number('mollifier_width', 0.0, low=0.0),
@@ -413,7 +414,8 @@ def cell_from_mapping(data: Any, source_file: str = '<memory>') -> Cell:
     _check_macro_barriers(source_file, barriers, zones)
     if not zones:
         x0, y0, x1, y1 = _belts_bounds(belts)
-        zones = (Zone(name='all', policy='micro', region=(x0, y0, x1, y1), resolution=0.01),)
+        zones = (Zone(name='all', policy=ZonePolicy.MICRO, region=(x0, y0, x1, y1),
+                      resolution=0.01),)
     return Cell(source_file=source_file, settings=settings, belts=belts, obstacles=obstacles,
                 part_types=part_types, sources=sources, sinks=sinks, light_barriers=barriers,
                 actuators=actuators, zones=zones, micro=micro, macro=macro)
@@ -426,7 +428,7 @@ def _check_macro_barriers(file: str, barriers: Sequence[LightBarrier],
         mx, my = 0.5 * (b.start[0] + b.end[0]), 0.5 * (b.start[1] + b.end[1])
         for z in zones:
             x0, y0, x1, y1 = z.region
-            if z.policy != 'macro' or not (x0 <= mx <= x1 and y0 <= my <= y1):
+            if z.policy != ZonePolicy.MACRO or not (x0 <= mx <= x1 and y0 <= my <= y1):
                 continue
             if abs(b.start[0] - b.end[0]) > 1e-9 and abs(b.start[1] - b.end[1]) > 1e-9:
                 raise CellError(file, f'light_barriers[{k}].end', list(b.end),

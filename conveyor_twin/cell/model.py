@@ -7,11 +7,24 @@ the invariants documented on each class.
 """
 
 from dataclasses import dataclass, field
+from enum import Enum
 import math
 from typing import Optional, Tuple
 
 Point = Tuple[float, float]
 Rect = Tuple[float, float, float, float]  # (x_min, y_min, x_max, y_max) [m]
+
+
+class Mode(str, Enum):
+    """A mode of the cell model: an Enum whose members are also their string values.
+
+    ``Mode`` members compare, hash, print and format as their value (``ZonePolicy.AUTO ==
+    'auto'``, ``f'{ZonePolicy.AUTO}' == 'auto'``), so a cell file's strings and the members are
+    interchangeable; the kernels take ints derived from them.
+    """
+
+    __str__ = str.__str__
+    __format__ = str.__format__
 
 
 @dataclass(frozen=True)
@@ -75,7 +88,16 @@ class Belt:
         return ((x0 - nx, y0 - ny), (x1 - nx, y1 - ny), (x1 + nx, y1 + ny), (x0 + nx, y0 + ny))
 
 
-OBSTACLE_KINDS = ('wall', 'deflector', 'peg', 'polygon')
+class ObstacleKind(Mode):
+    """Kind of a static obstacle (see :class:`Obstacle`)."""
+
+    WALL = 'wall'
+    DEFLECTOR = 'deflector'
+    PEG = 'peg'
+    POLYGON = 'polygon'
+
+
+OBSTACLE_KINDS = tuple(k.value for k in ObstacleKind)
 
 
 @dataclass(frozen=True)
@@ -91,7 +113,7 @@ class Obstacle:
     """
 
     name: str
-    kind: str
+    kind: ObstacleKind
     points: Tuple[Point, ...]
     thickness: float = 0.0
     radius: float = 0.0
@@ -232,7 +254,15 @@ class Actuator:
         return self.kind == 'diverter'
 
 
-ZONE_POLICIES = ('micro', 'macro', 'auto')
+class ZonePolicy(Mode):
+    """Scale at which a zone is simulated: always micro, always macro, or switched per tile."""
+
+    MICRO = 'micro'
+    MACRO = 'macro'
+    AUTO = 'auto'
+
+
+ZONE_POLICIES = tuple(p.value for p in ZonePolicy)
 
 
 @dataclass(frozen=True)
@@ -266,13 +296,21 @@ class Zone:
     """
 
     name: str
-    policy: str
+    policy: ZonePolicy
     region: Rect
     resolution: float
     auto: AutoSwitch = field(default_factory=AutoSwitch)
 
 
-CONTACT_MODELS = ('impulse', 'penalty')
+class ContactModel(Mode):
+    """Contact model of the micro simulator: impulses (Hoher et al.) or penalty springs
+    (Rideout, Stein)."""
+
+    IMPULSE = 'impulse'
+    PENALTY = 'penalty'
+
+
+CONTACT_MODELS = tuple(c.value for c in ContactModel)
 
 
 @dataclass(frozen=True)
@@ -289,7 +327,7 @@ class MicroModel:
         part radius; more substeps are taken when parts move faster (no tunnelling).
     """
 
-    contact: str = 'impulse'
+    contact: ContactModel = ContactModel.IMPULSE
     capacity: int = 20000
     penetration_slop: float = 1e-4
     penetration_correction: float = 0.8
@@ -298,8 +336,23 @@ class MicroModel:
     max_travel_fraction: float = 0.5
 
 
-MACRO_VARIANTS = ('capped', 'goettlich')
-MACRO_SCHEMES = ('upwind', 'limited')
+class MacroVariant(Mode):
+    """Flux of the macro model: capped (Hoher et al.) or with the collision operator
+    (Göttlich et al. 2014)."""
+
+    CAPPED = 'capped'
+    GOETTLICH = 'goettlich'
+
+
+class MacroScheme(Mode):
+    """Spatial order of the macro finite-volume scheme."""
+
+    UPWIND = 'upwind'
+    LIMITED = 'limited'
+
+
+MACRO_VARIANTS = tuple(v.value for v in MacroVariant)
+MACRO_SCHEMES = tuple(s.value for s in MacroScheme)
 
 
 @dataclass(frozen=True)
@@ -315,8 +368,8 @@ class MacroModel:
     :param cfl: Courant number per substep, (0, 1].
     """
 
-    variant: str = 'goettlich'
-    scheme: str = 'upwind'
+    variant: MacroVariant = MacroVariant.GOETTLICH
+    scheme: MacroScheme = MacroScheme.UPWIND
     rho_max: float = 0.0
     epsilon: float = 0.5
     mollifier_width: float = 0.0

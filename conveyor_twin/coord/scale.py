@@ -427,14 +427,14 @@ class ScaleCoupling:
         m = self.micro
         s = m.state
         w, h = region.w, region.sim.grid.h
-        res = _ho.release_windows(acc, skip, unit, ranges, w, ox, oy, h, vel, region.offsets,
-                                  2.0 * self.radius + _CLEARANCE, nx_, ny_, along_flow,
-                                  region.grid_box, region.active, self._tries, self._cand,
-                                  region.rot, self._near, self._bhead, self._bnext,
-                                  region.fifo, region.fstate,
-                                  self.released_by_type, thr, rng, s.counters, s.ids,
-                                  s.part_type, s.P, m.pt, m.shapes, m.shape_verts, m.act_state,
-                                  m.act_verts, m._va, m._vb, m._out)
+        res = _ho.release_windows(
+            (acc, skip, unit, thr, ranges), w,
+            (ox, oy, h, vel, region.offsets, 2.0 * self.radius + _CLEARANCE, nx_, ny_,
+             along_flow, region.grid_box, region.active),
+            self._tries, (self._cand, region.rot, self._near, self._bhead, self._bnext),
+            (region.fifo, region.fstate, self.released_by_type, rng),
+            (s.counters, s.ids, s.part_type, s.P, m.pt, m.shapes, m.shape_verts, m.act_state,
+             m.act_verts, m._va, m._vb, m._out))
         if int(res[0]) and acc is region.sim.density:
             region.sim.parts_taken += float(res[0])
         self.released += int(res[0])

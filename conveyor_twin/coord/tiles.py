@@ -83,11 +83,7 @@ def slip_per_tile(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray, 
 
 
 @njit(cache=True)
-def decide_tiles(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray, n: int,
-                 ox: float, oy: float, h: float, rho: np.ndarray, vcell: np.ndarray, tc: int,
-                 counts: np.ndarray, mass: np.ndarray, slip: np.ndarray, area: np.ndarray,
-                 macro: np.ndarray, locked: np.ndarray, last_switch: np.ndarray, step: int,
-                 dwell: int, to_macro: float, to_micro: float, free_flow_slip: float) -> int:
+def decide_tiles(parts: tuple, grid: tuple, tiles: tuple, step: int, thresholds: tuple) -> int:
     """Switch the tiles whose density crossed a threshold; return how many switched.
 
     Tile density [parts/m^2]: the integrated ``rho`` of macro tiles, the micro part centres
@@ -95,7 +91,19 @@ def decide_tiles(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray, n
     ``to_macro`` unless it is free flow (mean slip below ``free_flow_slip``, see the module
     docstring; 0: never), a macro tile turns micro below ``to_micro`` or when locked, each at
     least ``dwell`` steps after its last switch (``last_switch``, updated).
+
+    :param parts: ``(x, y, vx, vy, n)``: the micro parts [m, m/s] and their count.
+    :param grid: ``(ox, oy, h, rho, vcell)``: origin and cell edge [m], density
+        [parts/m^2], cell velocity [m/s].
+    :param tiles: ``(tc, counts, mass, slip, area, macro, locked, last_switch)``: tile edge
+        [cells], work per tile, modes.
+    :param thresholds: ``(dwell, to_macro, to_micro, free_flow_slip)`` [steps, parts/m^2,
+        parts/m^2, m/s].
     """
+    x, y, vx, vy, n = parts
+    ox, oy, h, rho, vcell = grid
+    tc, counts, mass, slip, area, macro, locked, last_switch = tiles
+    dwell, to_macro, to_micro, free_flow_slip = thresholds
     ny, nx = rho.shape
     count_micro(x, y, n, ox, oy, h, nx, ny, tc, counts)
     mass_per_tile(rho, h, tc, mass)
@@ -213,11 +221,12 @@ class AutoTiles:
         velocity ``vcell`` [m/s], ``(ny, nx, 2)``); return True if any tile switched."""
         g = self.grid
         p = self.params
-        switched = decide_tiles(x, y, vx, vy, n, g.origin_x, g.origin_y, g.h, rho, vcell,
-                                self.tc, self.counts, self.mass, self.slip, self.area,
-                                self.macro, self.locked, self.last_switch, step,
-                                self.dwell_steps, float(p.to_macro_density),
-                                float(p.to_micro_density), float(p.free_flow_slip))
+        switched = decide_tiles(
+            (x, y, vx, vy, n), (g.origin_x, g.origin_y, g.h, rho, vcell),
+            (self.tc, self.counts, self.mass, self.slip, self.area, self.macro, self.locked,
+             self.last_switch),
+            step, (self.dwell_steps, float(p.to_macro_density), float(p.to_micro_density),
+                   float(p.free_flow_slip)))
         self.switches += switched
         return switched > 0
 

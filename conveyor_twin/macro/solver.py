@@ -56,7 +56,8 @@ from typing import Optional, Sequence, Union
 from numba import njit
 import numpy as np
 
-from conveyor_twin.cell.model import Cell, MACRO_SCHEMES, MACRO_VARIANTS, Rect, Zone
+from conveyor_twin.cell.model import (Cell, MACRO_SCHEMES, MACRO_VARIANTS, MacroScheme,
+                                      MacroVariant, Rect, Zone)
 from conveyor_twin.macro import collision as _col
 from conveyor_twin.macro import fluxes as _fx
 from conveyor_twin.macro import grid as _grid
@@ -95,14 +96,8 @@ def _merge_y_ranges(yr: np.ndarray, lohi: np.ndarray, out: np.ndarray) -> None:
 # kernels of fluxes.py and collision.py into itself: after editing those, change this file (or
 # clear ``__pycache__``), or ``advance`` keeps running the old kernels from the cache.
 @njit(cache=True)
-def advance(nsteps: int, nsub: int, dts: float, parity: np.ndarray, rho: np.ndarray,
-            ux: np.ndarray, uy: np.ndarray, wx: np.ndarray, wy: np.ndarray, use_op: bool,
-            solid: np.ndarray, h: float, rho_max: float, capped: bool, limited: bool,
-            limiter: int, in_rate: np.ndarray, in_acc: np.ndarray, out_acc: np.ndarray,
-            out_total: np.ndarray, ax: np.ndarray, ay: np.ndarray, slope: np.ndarray,
-            seed: np.ndarray, yr: np.ndarray, yr_op: np.ndarray, eps: float, w: np.ndarray,
-            dx: np.ndarray, dy: np.ndarray, gx: np.ndarray, gy: np.ndarray, lohi: np.ndarray,
-            rng: np.ndarray) -> int:
+def advance(nsteps: int, nsub: int, dts: float, field: tuple, scheme: tuple, boundary: tuple,
+            work: tuple, collision: tuple) -> int:
     """Advance ``nsteps`` twin steps of ``nsub`` substeps of ``dts`` [s] each, in place.
 
     ``parity[0]`` counts substeps (the sweep order alternates with it). ``wx``, ``wy`` are the
@@ -114,7 +109,23 @@ def advance(nsteps: int, nsub: int, dts: float, parity: np.ndarray, rho: np.ndar
     :func:`conveyor_twin.macro.fluxes.sweep_x` and
     :func:`conveyor_twin.macro.collision.collision_operator`. Return a bit mask: 1 if any
     ``in_acc`` entry is nonzero, 2 if any ``out_acc`` entry is.
+
+    The arguments come in tuples by concept (unpacked here, no copies):
+
+    :param field: ``(rho, ux, uy, wx, wy, solid)``: density [parts/m^2], belt and total face
+        velocities [m/s], solid mask.
+    :param scheme: ``(h, rho_max, capped, limited, limiter)``: cell edge [m], density cap
+        [parts/m^2], capacity guard, second order, limiter id.
+    :param boundary: ``(in_rate, in_acc, out_acc, out_total)`` per boundary face.
+    :param work: ``(parity, ax, ay, slope, seed, yr, yr_op)``.
+    :param collision: ``(use_op, eps, w, dx, dy, gx, gy, lohi, rng)``: the collision
+        operator (used when ``use_op``), strength ``eps`` [m/s] and its work arrays.
     """
+    rho, ux, uy, wx, wy, solid = field
+    h, rho_max, capped, limited, limiter = scheme
+    in_rate, in_acc, out_acc, out_total = boundary
+    parity, ax, ay, slope, seed, yr, yr_op = work
+    use_op, eps, w, dx, dy, gx, gy, lohi, rng = collision
     in_acc[:] = 0.0
     out_acc[:] = 0.0
     for _ in range(nsteps):
@@ -170,20 +181,22 @@ class MacroSim:
                  slide_band: float = DEFAULT_SLIDE_BAND) -> None:
         self.cell = cell
         self.zone = _grid.zone_for(cell, zone)
-        self.variant = variant or cell.macro.variant
-        self.scheme = scheme or cell.macro.scheme
-        if self.variant not in MACRO_VARIANTS:
-            msg = f'macro variant {self.variant!r} is not one of {MACRO_VARIANTS}'
+        variant = variant or cell.macro.variant
+        scheme = scheme or cell.macro.scheme
+        if variant not in MACRO_VARIANTS:
+            msg = f'macro variant {str(variant)!r} is not one of {MACRO_VARIANTS}'
             raise ValueError(msg)
-        if self.scheme not in MACRO_SCHEMES:
-            msg = f'macro scheme {self.scheme!r} is not one of {MACRO_SCHEMES}'
+        if scheme not in MACRO_SCHEMES:
+            msg = f'macro scheme {str(scheme)!r} is not one of {MACRO_SCHEMES}'
             raise ValueError(msg)
+        self.variant = MacroVariant(variant)
+        self.scheme = MacroScheme(scheme)
         self.limiter = int(limiter)
-        self.capacity_guard = self.variant == 'capped' or bool(guard)
+        self.capacity_guard = self.variant == MacroVariant.CAPPED or bool(guard)
         self.grid = g = _grid.Grid.from_zone(self.zone)
         self.dt = float(cell.settings.step)
         self.rho_max = float(cell.rho_max)
-        self.epsilon = float(cell.macro.epsilon) if self.variant == 'goettlich' else 0.0
+        self.epsilon = float(cell.macro.epsilon) if self.variant == MacroVariant.GOETTLICH else 0.0
         self.cfl = float(cell.macro.cfl)
         ny, nx = g.ny, g.nx
         self._rho = np.zeros((ny, nx))
@@ -217,8 +230,8 @@ class MacroSim:
         self._seed = np.zeros(max(nx, ny) + 1, dtype=np.uint8)
         self._yr = np.zeros((ny + 1, 2), dtype=np.int64)
         self._yr_op = np.zeros((ny + 1, 2), dtype=np.int64)
-        self._use_op = self.variant == 'goettlich'
-        self._limited = self.scheme == 'limited'
+        self._use_op = self.variant == MacroVariant.GOETTLICH
+        self._limited = self.scheme == MacroScheme.LIMITED
         self._lohi = np.zeros((ny, 2), dtype=np.int64)
         self._rng = np.zeros((ny, 2), dtype=np.int64)
         self._parity = np.zeros(1, dtype=np.int64)
@@ -351,12 +364,14 @@ class MacroSim:
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` twin steps; :attr:`inflow` / :attr:`outflow` hold this call's amounts."""
-        flags = advance(int(n), self.substeps, self.dt / self.substeps, self._parity, self._rho,
-                self._ux, self._uy, self._wx, self._wy, self._use_op, self._solid,
-                self.grid.h, self.rho_max, self.capacity_guard, self._limited, self.limiter,
-                self._in_rate, self.inflow, self.outflow, self.outflow_total, self._ax,
-                self._ay, self._slope, self._seed, self._yr, self._yr_op, self.epsilon,
-                self._w, self._dx, self._dy, self._gx, self._gy, self._lohi, self._rng)
+        flags = advance(
+            int(n), self.substeps, self.dt / self.substeps,
+            (self._rho, self._ux, self._uy, self._wx, self._wy, self._solid),
+            (self.grid.h, self.rho_max, self.capacity_guard, self._limited, self.limiter),
+            (self._in_rate, self.inflow, self.outflow, self.outflow_total),
+            (self._parity, self._ax, self._ay, self._slope, self._seed, self._yr, self._yr_op),
+            (self._use_op, self.epsilon, self._w, self._dx, self._dy, self._gx, self._gy,
+             self._lohi, self._rng))
         # all-zero amounts add nothing (the sums are skipped, not changed)
         if flags & 1:
             self.parts_in += float(self.inflow.sum())

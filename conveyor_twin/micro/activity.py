@@ -21,7 +21,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from conveyor_twin.cell.model import Cell
+from conveyor_twin.cell.model import Cell, ContactModel
 from conveyor_twin.micro.sim import MicroSim
 
 PHYSICAL = ('belt_friction', 'part_inertia', 'contact_friction')
@@ -75,7 +75,7 @@ def run_activity(cell: Cell, stiffness: float, damping: float, *, seed: int, dur
     :param settle: time run first and not counted [s] (arrival impacts, initial transients).
     :param positions: (n, 2) initial part centres [m], given the belt's velocity.
     """
-    micro = replace(cell.micro, contact='penalty', penalty_stiffness=stiffness,
+    micro = replace(cell.micro, contact=ContactModel.PENALTY, penalty_stiffness=stiffness,
                     penalty_damping=damping)
     sim = MicroSim(replace(cell, micro=micro), seed=seed, track_activity=True)
     if positions is not None and len(positions):

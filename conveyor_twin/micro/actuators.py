@@ -15,9 +15,9 @@ from numba import njit
 import numpy as np
 
 from conveyor_twin.cell.model import Actuator
-from conveyor_twin.micro.contacts import (AS_ACTIVE, AS_COLUMNS, AS_E, AS_MU, AS_NV, AS_PX,
-                                          AS_PY, AS_R, AS_VX, AS_VY, AS_W, AS_XMAX, AS_XMIN,
-                                          AS_YMAX, AS_YMIN)
+from conveyor_twin.micro.contacts.tables import (AS_ACTIVE, AS_COLUMNS, AS_E, AS_MU, AS_NV, AS_PX,
+                                                 AS_PY, AS_R, AS_VX, AS_VY, AS_W, AS_XMAX, AS_XMIN,
+                                                 AS_YMAX, AS_YMIN)
 
 KIND_PUSHER = 0
 KIND_STOPPER = 1

@@ -15,7 +15,7 @@ from numba import njit
 import numpy as np
 
 from conveyor_twin.cell.model import Belt
-from conveyor_twin.micro.contacts import A_BELT, MP_DT, MP_FLOOR_MU, MP_GRAVITY, MP_TRACK
+from conveyor_twin.micro.contacts.tables import A_BELT, MP_DT, MP_FLOOR_MU, MP_GRAVITY, MP_TRACK
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_MASS, PT_SPIN_ARM
 
 # Friction coefficient between a part and the fixed floor beside the belts.

@@ -14,10 +14,10 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from conveyor_twin.cell.model import Cell, Obstacle
-from conveyor_twin.micro.contacts import (SH_AX, SH_AY, SH_BX, SH_BY, SH_COLUMNS, SH_E, SH_MU,
-                                          SH_NV, SH_OFF, SH_R, SH_XMAX, SH_XMIN, SH_YMAX,
-                                          SH_YMIN)
+from conveyor_twin.cell.model import Cell, Obstacle, ObstacleKind
+from conveyor_twin.micro.contacts.tables import (SH_AX, SH_AY, SH_BX, SH_BY, SH_COLUMNS, SH_E,
+                                                 SH_MU, SH_NV, SH_OFF, SH_R, SH_XMAX, SH_XMIN,
+                                                 SH_YMAX, SH_YMIN)
 
 # Most grid cells allowed; the cell size grows to stay below it.
 MAX_GRID_CELLS = 1 << 20
@@ -50,11 +50,11 @@ def obstacle_shapes(obstacles: Sequence[Obstacle]) -> Tuple[np.ndarray, np.ndarr
         owner.append(index)
 
     for index, obstacle in enumerate(obstacles):
-        if obstacle.kind in ('wall', 'deflector'):
+        if obstacle.kind in (ObstacleKind.WALL, ObstacleKind.DEFLECTOR):
             pts = obstacle.points
             for a, b in zip(pts[:-1], pts[1:]):
                 add((a, b), 0.5 * obstacle.thickness, obstacle, index)
-        elif obstacle.kind == 'peg':
+        elif obstacle.kind == ObstacleKind.PEG:
             add((obstacle.points[0],), obstacle.radius, obstacle, index)
         else:
             pts = list(obstacle.points)

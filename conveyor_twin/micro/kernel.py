@@ -22,9 +22,11 @@ import math
 from numba import njit
 
 from conveyor_twin.micro.actuators import actuator_shapes, AP_LENGTH, AP_WIDTH
-from conveyor_twin.micro.contacts import (A_INERTIA, correct_positions, detect, MODE_PENALTY,
-                                          MP_DT, MP_TRACK, penalty_forces, prepare_contacts,
-                                          solve_impulses, update_pairs)
+from conveyor_twin.micro.contacts.broad_phase import update_pairs
+from conveyor_twin.micro.contacts.narrow_phase import detect
+from conveyor_twin.micro.contacts.response import (correct_positions, MODE_PENALTY, penalty_forces,
+                                                   prepare_contacts, solve_impulses)
+from conveyor_twin.micro.contacts.tables import A_INERTIA, MP_DT, MP_TRACK
 from conveyor_twin.micro.drive import belt_drive, ramp
 from conveyor_twin.micro.sensors import update_barriers
 from conveyor_twin.micro.sinks import leave
@@ -42,7 +44,7 @@ CF_PENALTY_DT = 4     # largest stable penalty substep [s]
 CF_MAX_SUB = 5        # most substeps per step
 CF_FLOOR_MU = 6
 CF_PASSES = 7         # impulse model: sweeps over the contacts (velocity and position)
-CF_SKIN = 8           # neighbour list skin [m] (see contacts.update_pairs)
+CF_SKIN = 8           # neighbour list skin [m] (see contacts.broad_phase.update_pairs)
 CF_COLUMNS = 9
 
 # --- rows of the belt array ``belt_v`` (3, B) ---
@@ -88,12 +90,33 @@ def _substeps(n, ptype, P, pt, apar, act_v, cfg):
 
 
 @njit(cache=True)
-def run_steps(nsteps, counters, ids, ptype, P, W, pt, mp, cfg, belts, belt_v, apar, act_v,
-              act_state, act_verts, gpar, gdim, cell_table, cell_items, part_cell,
-              static_start, static_items, shp, shp_verts, cand, va, vb, out, ct, cidx, acc,
-              src, src_next, src_state, rng, sinks, sink_count, region, ob_id, ob_type, ob_P,
-              lb, blocked, edge_count, last_part, ev_i, ev_f, nbr, pos0):
-    """Advance ``nsteps`` steps in place (see the module docstring for the arrays' meaning)."""
+def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, exits, barriers):
+    """Advance ``nsteps`` steps in place (see the module docstring for the arrays' meaning).
+
+    The arrays come in tuples by concept (unpacked here, no copies; built by
+    :class:`conveyor_twin.micro.sim.MicroSim`):
+
+    :param parts: ``(counters, ids, ptype, P, W)``: the parts' state and work rows.
+    :param model: ``(pt, mp, cfg)``: part types, contact model parameters, configuration.
+    :param drives: ``(belts, belt_v, apar, act_v, act_state, act_verts)``: belts, actuators.
+    :param grid: ``(gpar, gdim, cell_table, cell_items, part_cell, cand, nbr, pos0)``: the
+        broad phase's grid and neighbour list.
+    :param statics: ``(static_start, static_items, shp, shp_verts)``: static shapes per cell.
+    :param contacts: ``(va, vb, out, ct, cidx, acc)``: narrow-phase scratch, contact records,
+        activities.
+    :param sources: ``(src, src_next, src_state, rng)``; ``exits``: ``(sinks, sink_count,
+        region, ob_id, ob_type, ob_P)``; ``barriers``: ``(lb, blocked, edge_count, last_part,
+        ev_i, ev_f)``.
+    """
+    counters, ids, ptype, P, W = parts
+    pt, mp, cfg = model
+    belts, belt_v, apar, act_v, act_state, act_verts = drives
+    gpar, gdim, cell_table, cell_items, part_cell, cand, nbr, pos0 = grid
+    static_start, static_items, shp, shp_verts = statics
+    va, vb, out, ct, cidx, acc = contacts
+    src, src_next, src_state, rng = sources
+    sinks, sink_count, region, ob_id, ob_type, ob_P = exits
+    lb, blocked, edge_count, last_part, ev_i, ev_f = barriers
     dt = cfg[CF_DT]
     mode = int(cfg[CF_MODE])
     impulse = mode != MODE_PENALTY

@@ -161,7 +161,7 @@ def impulse_ref(va, wa, ma_inv, ia_inv, ra, vb, wb, mb_inv, ib_inv, rb, n, e, mu
 
 def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np.ndarray,
                i_inv: np.ndarray, key: np.ndarray, passes: int) -> None:
-    """Apply the impulse sweeps of :func:`conveyor_twin.micro.contacts.solve_impulses`.
+    """Apply the impulse sweeps of :func:`conveyor_twin.micro.contacts.response.solve_impulses`.
 
     :param contacts: dicts with ``a``, ``b`` (-1: fixed), ``n``, ``ra``, ``rb``, ``e``,
         ``mu_s``, ``mu_k``, ``v_t``, ``bv``, ``bw``. :param v: (n, 2) velocities, in place.

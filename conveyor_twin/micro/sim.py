@@ -20,7 +20,7 @@ from typing import Dict, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
-from conveyor_twin.cell.model import Cell
+from conveyor_twin.cell.model import Cell, ContactModel
 from conveyor_twin.micro.actuators import actuator_arrays, actuator_shapes, actuator_table
 from conveyor_twin.micro.contacts import (A_BELT, A_COLUMNS, A_CONTACT_FRICTION, A_DAMPER,
                                           A_INERTIA, A_SPRING, MODE_IMPULSE, MODE_PENALTY,
@@ -51,7 +51,7 @@ PENALTY_OMEGA_DT = 0.5
 # Impulse model: sweeps over the contacts per substep (the first with restitution; the others
 # plastic, touching only contacts still closing: they matter only where contacts share bodies,
 # as in a jam). 1 is Hoher et al.'s single pass; it does not hold a jam (discs overlap by up to a
-# diameter, see the contacts module's docstring), so 2.
+# diameter, see the docstring of contacts.response), so 2.
 CONTACT_PASSES = 2
 # Neighbour list skin as a fraction of the smallest part radius: a part may move 0.49 of it
 # before the list is rebuilt (in a jam it lives for many steps; in free flow at 0.5 m/s with
@@ -123,8 +123,8 @@ class MicroSim:
         self.seed = int(seed)
         self.dt = float(cell.settings.step)
         self.region = region
-        self.contact = micro.contact
-        penalty = micro.contact == 'penalty'
+        self.contact = ContactModel(micro.contact)
+        penalty = self.contact == ContactModel.PENALTY
         if track_activity is None:
             track_activity = penalty
         self.state = PartState(micro.capacity)
@@ -169,7 +169,7 @@ class MicroSim:
         # obstacles and grid
         self.shapes, self.shape_verts, self.shape_owner = obstacle_shapes(cell.obstacles)
         bounds = world_bounds(cell, self.shapes, region)
-        # cells and static lists grown by the neighbour list's skin (contacts.update_pairs)
+        # cells and static lists grown by the neighbour list's skin (update_pairs)
         self.grid = build_grid(bounds, max_brad, self.cfg[CF_SKIN], self.shapes)
         cap = self.state.capacity
         self._cell_table = grid_table(self.grid.cells)
@@ -201,17 +201,19 @@ class MicroSim:
         self._ev_i = np.zeros((event_capacity, EV_INT_COLUMNS), dtype=np.int64)
         self._ev_f = np.zeros((event_capacity, EV_FLOAT_COLUMNS))
         s = self.state
-        self._args = (s.counters, s.ids, s.part_type, s.P, self._W, self.pt, self.mp, self.cfg,
-                      self.belts, self.belt_v, self.apar, self.act_v, self.act_state,
-                      self.act_verts, self.grid.gpar, self.grid.gdim, self._cell_table,
-                      self._cell_items, self._part_cell, self.grid.static_start,
-                      self.grid.static_items, self.shapes, self.shape_verts, self._cand,
-                      self._va, self._vb, self._out, self._ct, self._cidx, self.acc,
-                      self.src, self.src_next, self.src_state, self.rng, self.sinks,
-                      self.sink_count,
-                      self.region_array, self._ob_id, self._ob_type, self._ob_P, self.lb,
-                      self.blocked, self.edge_count, self.last_part, self._ev_i, self._ev_f,
-                      self._nbr, self._pos0)
+        # the arrays of run_steps, grouped by concept (see its docstring)
+        self._args = (
+            (s.counters, s.ids, s.part_type, s.P, self._W),
+            (self.pt, self.mp, self.cfg),
+            (self.belts, self.belt_v, self.apar, self.act_v, self.act_state, self.act_verts),
+            (self.grid.gpar, self.grid.gdim, self._cell_table, self._cell_items,
+             self._part_cell, self._cand, self._nbr, self._pos0),
+            (self.grid.static_start, self.grid.static_items, self.shapes, self.shape_verts),
+            (self._va, self._vb, self._out, self._ct, self._cidx, self.acc),
+            (self.src, self.src_next, self.src_state, self.rng),
+            (self.sinks, self.sink_count, self.region_array, self._ob_id, self._ob_type,
+             self._ob_P),
+            (self.lb, self.blocked, self.edge_count, self.last_part, self._ev_i, self._ev_f))
 
     # --- time ---
     def step(self, n: int = 1) -> None:

@@ -17,9 +17,10 @@ import numpy as np
 
 from conveyor_twin.cell.model import Cell, Source
 from conveyor_twin.micro.collide import collide
-from conveyor_twin.micro.contacts import (AS_ACTIVE, AS_NV, AS_R, AS_XMAX, AS_XMIN, AS_YMAX,
-                                          AS_YMIN, part_shape, SH_NV, SH_OFF, SH_R, SH_XMAX,
-                                          SH_XMIN, SH_YMAX, SH_YMIN)
+from conveyor_twin.micro.contacts.narrow_phase import part_shape
+from conveyor_twin.micro.contacts.tables import (AS_ACTIVE, AS_NV, AS_R, AS_XMAX, AS_XMIN, AS_YMAX,
+                                                 AS_YMIN, SH_NV, SH_OFF, SH_R, SH_XMAX, SH_XMIN,
+                                                 SH_YMAX, SH_YMIN)
 from conveyor_twin.micro.drive import surface_velocity
 from conveyor_twin.micro.state import (C_ENTERED, C_N, C_NEXT_ID, P_VX, P_VY, P_WZ, P_X, P_X_PREV,
                                        P_Y, P_Y_PREV, P_YAW, P_YAW_PREV, PT_BRAD)

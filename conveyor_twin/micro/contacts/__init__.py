@@ -1,0 +1,21 @@
+"""Contacts of the micro simulator, in three phases run once per substep.
+
+1. :mod:`.broad_phase`: which parts may touch (uniform grid, neighbour list with a skin);
+2. :mod:`.narrow_phase`: the contact records of the bodies that touch (normal, points, depth,
+   materials), in a canonical order whatever the broad phase;
+3. :mod:`.response`: what the contacts do to the bodies (impulses and position correction, or
+   penalty forces), reading only the records.
+
+:mod:`.tables` holds the column layouts of the arrays the phases share (model parameters,
+activities, static shapes, actuators, contact records). The names below are re-exported so
+that ``from conveyor_twin.micro.contacts import ...`` names any of them.
+"""
+
+from conveyor_twin.micro.contacts.broad_phase import (  # noqa: F401
+    build_grid, grid_table, NB_BUILDS, NB_HEADER, NB_MOVE, NB_N, NB_PAIRS, NB_VALID,
+    neighbour_arrays, update_pairs)
+from conveyor_twin.micro.contacts.narrow_phase import detect, part_shape, scratch  # noqa: F401
+from conveyor_twin.micro.contacts.response import (  # noqa: F401
+    correct_positions, friction_coefficient, impulse_response, MODE_IMPULSE, MODE_PENALTY,
+    penalty_force, penalty_forces, prepare_contacts, RESTITUTION_THRESHOLD, solve_impulses)
+from conveyor_twin.micro.contacts.tables import *  # noqa: F401,F403

@@ -1,0 +1,235 @@
+"""Narrow phase: the contact records (normal, points, depth, materials) of touching bodies.
+
+:func:`detect` walks the broad phase's neighbour list (part pairs), then every part against the
+static shapes of its grid cell and the active actuators, and writes one record per contact
+point (columns ``CT_*`` of :mod:`.tables`) in the canonical order: all part pairs (i, j),
+i < j, lexicographically, then every part against the static shapes (ascending index) and then
+the actuators. :mod:`conveyor_twin.micro.reference` does the same in plain Python. The geometry of
+each shape pair (discs, capsules, rounded polygons) is in :mod:`conveyor_twin.micro.collide`.
+"""
+
+import math
+
+from numba import njit
+import numpy as np
+
+from conveyor_twin.micro.collide import box_vertices, circle_circle, collide
+from conveyor_twin.micro.contacts.broad_phase import NB_HEADER
+from conveyor_twin.micro.contacts.tables import (AS_ACTIVE, AS_E, AS_MU, AS_NV, AS_PX, AS_PY,
+                                                 AS_R, AS_VX, AS_VY, AS_W, AS_XMAX, AS_XMIN,
+                                                 AS_YMAX, AS_YMIN, CONTACTS_PER_PART, CT_BVX,
+                                                 CT_BVY, CT_BW, CT_COLUMNS, CT_DEPTH, CT_E,
+                                                 CT_MU_K, CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY,
+                                                 CT_RBX, CT_RBY, CT_V_T, SH_E, SH_MU, SH_NV,
+                                                 SH_OFF, SH_R, SH_XMAX, SH_XMIN, SH_YMAX,
+                                                 SH_YMIN)
+from conveyor_twin.micro.state import (PT_BRAD, PT_E, PT_HL, PT_HW, PT_MU_K, PT_MU_S, PT_RADIUS,
+                                       PT_SHAPE, PT_V_T, SHAPE_DISC)
+
+
+@njit(cache=True)
+def part_shape(pt, t, x, y, yaw, verts):
+    """Fill ``verts`` with the core of a part; return (number of vertices, radius [m])."""
+    if pt[t, PT_SHAPE] == SHAPE_DISC:
+        verts[0, 0] = x
+        verts[0, 1] = y
+        return 1, pt[t, PT_RADIUS]
+    box_vertices(x, y, yaw, pt[t, PT_HL], pt[t, PT_HW], verts)
+    return 4, 0.0
+
+
+@njit(cache=True, inline='always')
+def _record(nc, ct, cidx, a, b, px, py, ax, ay, bx, by, nx, ny, depth, e, mu_s, mu_k, v_t,
+            bvx, bvy, bw):
+    ct[nc, CT_NX] = nx
+    ct[nc, CT_NY] = ny
+    ct[nc, CT_RAX] = px - ax
+    ct[nc, CT_RAY] = py - ay
+    ct[nc, CT_RBX] = px - bx
+    ct[nc, CT_RBY] = py - by
+    ct[nc, CT_DEPTH] = depth
+    ct[nc, CT_E] = e
+    ct[nc, CT_MU_S] = mu_s
+    ct[nc, CT_MU_K] = mu_k
+    ct[nc, CT_V_T] = v_t
+    ct[nc, CT_BVX] = bvx
+    ct[nc, CT_BVY] = bvy
+    ct[nc, CT_BW] = bw
+    cidx[nc, 0] = a
+    cidx[nc, 1] = b
+
+
+@njit(cache=True)
+def _pair(i, j, ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx):
+    """Record the contacts of parts i and j; return the new contact count."""
+    ti = ptype[i]
+    tj = ptype[j]
+    if pt[ti, PT_SHAPE] == SHAPE_DISC and pt[tj, PT_SHAPE] == SHAPE_DISC:
+        count = circle_circle(x[i], y[i], pt[ti, PT_RADIUS], x[j], y[j], pt[tj, PT_RADIUS], out)
+    else:
+        na, ra = part_shape(pt, ti, x[i], y[i], yaw[i], va)
+        nb, rb = part_shape(pt, tj, x[j], y[j], yaw[j], vb)
+        count = collide(va, na, ra, vb, nb, rb, out)
+    if count == 0:
+        return nc
+    e = 0.5 * (pt[ti, PT_E] + pt[tj, PT_E])
+    mu_s = 0.5 * (pt[ti, PT_MU_S] + pt[tj, PT_MU_S])
+    mu_k = 0.5 * (pt[ti, PT_MU_K] + pt[tj, PT_MU_K])
+    v_t = 0.5 * (pt[ti, PT_V_T] + pt[tj, PT_V_T])
+    for c in range(count):
+        if nc >= ct.shape[0]:
+            return nc
+        _record(nc, ct, cidx, i, j, out[2 + 3 * c], out[3 + 3 * c], x[i], y[i], x[j], y[j],
+                out[0], out[1], out[4 + 3 * c], e, mu_s, mu_k, v_t, 0.0, 0.0, 0.0)
+        nc += 1
+    return nc
+
+
+@njit(cache=True)
+def _fixed(i, ptype, x, y, yaw, pt, va, vb, nb, rb, bvx, bvy, bw, bpx, bpy, e, mu, out,
+           nc, ct, cidx):
+    """Record the contacts of part i with a fixed or kinematic body (core ``vb[:nb]``)."""
+    ti = ptype[i]
+    na, ra = part_shape(pt, ti, x[i], y[i], yaw[i], va)
+    count = collide(va, na, ra, vb, nb, rb, out)
+    if count == 0:
+        return nc
+    # the obstacle's friction is the sliding value; the part's static/sliding ratio the static
+    ratio = pt[ti, PT_MU_S] / pt[ti, PT_MU_K] if pt[ti, PT_MU_K] > 0.0 else 1.0
+    for c in range(count):
+        if nc >= ct.shape[0]:
+            return nc
+        _record(nc, ct, cidx, i, -1, out[2 + 3 * c], out[3 + 3 * c], x[i], y[i], bpx, bpy,
+                out[0], out[1], out[4 + 3 * c], e, mu * ratio, mu, pt[ti, PT_V_T], bvx, bvy,
+                bw)
+        nc += 1
+    return nc
+
+
+@njit(cache=True)
+def detect(n, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, shp, shp_verts,
+           act_state, act_verts, va, vb, out, ct, cidx):
+    """Record every contact of parts 0..n-1 in the canonical order; return how many.
+
+    :param nbr, part_cell: the neighbour list and the parts' grid cells as
+        :func:`update_pairs` left them (current for these positions).
+    :param shp: static shape table (S, SH_COLUMNS); ``shp_verts`` (V, 2) their cores [m].
+    :param act_state: actuator table (A, AS_COLUMNS); ``act_verts`` (A, 4, 2) their cores.
+    :param static_start: int64[cells + 1], ``static_items``: the static shapes of each cell.
+    :param va: (4, 2) scratch; ``vb`` (4, 2) scratch; ``out`` float64[8].
+    :param ct: (C, CT_COLUMNS) contact records, ``cidx`` (C, 2) their bodies (output). When
+        full, further contacts are dropped (the caller sizes it; see ``contacts_full``).
+    """
+    cap = part_cell.shape[0]
+    o_start = NB_HEADER + cap
+    o_j = o_start + cap + 1
+    nc = 0
+    for i in range(n):
+        bri = pt[ptype[i], PT_BRAD]
+        xi = x[i]
+        yi = y[i]
+        ti = ptype[i]
+        disc_i = pt[ti, PT_SHAPE] == SHAPE_DISC
+        for p in range(nbr[o_start + i], nbr[o_start + i + 1]):
+            j = nbr[o_j + p]
+            tj = ptype[j]
+            dx = x[j] - xi
+            dy = y[j] - yi
+            rr = bri + pt[tj, PT_BRAD]
+            if dx * dx + dy * dy >= rr * rr:
+                continue  # listed within the skin, not within the bounding radii
+            if disc_i and pt[tj, PT_SHAPE] == SHAPE_DISC:
+                # disc-disc, the common case, written out (same arithmetic as circle_circle)
+                dx = xi - x[j]
+                dy = yi - y[j]
+                rsum = pt[ti, PT_RADIUS] + pt[tj, PT_RADIUS]
+                d2 = dx * dx + dy * dy
+                if d2 >= rsum * rsum or nc >= ct.shape[0]:
+                    continue
+                d = math.sqrt(d2)
+                if d > 0.0:
+                    nx = dx / d
+                    ny = dy / d
+                else:
+                    nx = 1.0
+                    ny = 0.0
+                depth = rsum - d
+                rb = pt[tj, PT_RADIUS] - 0.5 * depth
+                _record(nc, ct, cidx, i, j, x[j] + nx * rb, y[j] + ny * rb, xi, yi, x[j], y[j],
+                        nx, ny, depth, 0.5 * (pt[ti, PT_E] + pt[tj, PT_E]),
+                        0.5 * (pt[ti, PT_MU_S] + pt[tj, PT_MU_S]),
+                        0.5 * (pt[ti, PT_MU_K] + pt[tj, PT_MU_K]),
+                        0.5 * (pt[ti, PT_V_T] + pt[tj, PT_V_T]), 0.0, 0.0, 0.0)
+                nc += 1
+            else:
+                nc = _pair(i, j, ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx)
+    for i in range(n):
+        bri = pt[ptype[i], PT_BRAD]
+        c = part_cell[i]
+        for k in range(static_start[c], static_start[c + 1]):
+            s = static_items[k]
+            if (x[i] + bri <= shp[s, SH_XMIN] or x[i] - bri >= shp[s, SH_XMAX]
+                    or y[i] + bri <= shp[s, SH_YMIN] or y[i] - bri >= shp[s, SH_YMAX]):
+                continue
+            off = int(shp[s, SH_OFF])
+            nv = int(shp[s, SH_NV])
+            if nv == 2 and pt[ptype[i], PT_SHAPE] == SHAPE_DISC:
+                # disc-capsule, the common case, written out (as circle_segment)
+                ax = shp_verts[off, 0]
+                ay = shp_verts[off, 1]
+                ex = shp_verts[off + 1, 0] - ax
+                ey = shp_verts[off + 1, 1] - ay
+                l2 = ex * ex + ey * ey
+                f = 0.0
+                if l2 > 0.0:
+                    f = min(max(((x[i] - ax) * ex + (y[i] - ay) * ey) / l2, 0.0), 1.0)
+                qx = ax + f * ex
+                qy = ay + f * ey
+                dx = x[i] - qx
+                dy = y[i] - qy
+                rb = shp[s, SH_R]
+                rsum = pt[ptype[i], PT_RADIUS] + rb
+                d2 = dx * dx + dy * dy
+                if d2 >= rsum * rsum or nc >= ct.shape[0]:
+                    continue
+                d = math.sqrt(d2)
+                if d > 0.0:
+                    nx = dx / d
+                    ny = dy / d
+                elif l2 > 0.0:
+                    nx = ey / math.sqrt(l2)
+                    ny = -ex / math.sqrt(l2)
+                else:
+                    nx = 1.0
+                    ny = 0.0
+                depth = rsum - d
+                ti = ptype[i]
+                mu = shp[s, SH_MU]
+                ratio = pt[ti, PT_MU_S] / pt[ti, PT_MU_K] if pt[ti, PT_MU_K] > 0.0 else 1.0
+                _record(nc, ct, cidx, i, -1, qx + nx * (rb - 0.5 * depth),
+                        qy + ny * (rb - 0.5 * depth), x[i], y[i], 0.0, 0.0, nx, ny, depth,
+                        shp[s, SH_E], mu * ratio, mu, pt[ti, PT_V_T], 0.0, 0.0, 0.0)
+                nc += 1
+                continue
+            nc = _fixed(i, ptype, x, y, yaw, pt, va, shp_verts[off:off + nv], nv,
+                        shp[s, SH_R], 0.0, 0.0, 0.0, 0.0, 0.0, shp[s, SH_E], shp[s, SH_MU],
+                        out, nc, ct, cidx)
+        for a in range(act_state.shape[0]):
+            if act_state[a, AS_ACTIVE] == 0.0:
+                continue
+            if (x[i] + bri <= act_state[a, AS_XMIN] or x[i] - bri >= act_state[a, AS_XMAX]
+                    or y[i] + bri <= act_state[a, AS_YMIN]
+                    or y[i] - bri >= act_state[a, AS_YMAX]):
+                continue
+            nc = _fixed(i, ptype, x, y, yaw, pt, va, act_verts[a], int(act_state[a, AS_NV]),
+                        act_state[a, AS_R], act_state[a, AS_VX], act_state[a, AS_VY],
+                        act_state[a, AS_W], act_state[a, AS_PX], act_state[a, AS_PY],
+                        act_state[a, AS_E], act_state[a, AS_MU], out, nc, ct, cidx)
+    return nc
+
+
+def scratch(capacity: int):
+    """Return the scratch arrays of the contact kernels: (cand, va, vb, out, ct, cidx)."""
+    size = CONTACTS_PER_PART * capacity
+    return (np.zeros(capacity + 1, dtype=np.int64), np.zeros((4, 2)), np.zeros((4, 2)),
+            np.zeros(8), np.zeros((size, CT_COLUMNS)), np.zeros((size, 2), dtype=np.int64))

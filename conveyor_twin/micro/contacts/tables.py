@@ -1,0 +1,90 @@
+"""Column layouts of the contact kernels' tables (shared by broad phase, narrow phase, response).
+
+Every table is a float64 (or int64) NumPy array with one row per item and the columns named
+here, so the kernels take only arrays and ints.
+"""
+
+# --- model parameter slots (float64 array ``mp``) ---
+MP_SLOP = 0           # penetration left uncorrected [m]
+MP_CORRECTION = 1     # fraction of the excess penetration removed per substep
+MP_STIFFNESS = 2      # penalty spring [N/m]
+MP_DAMPING = 3        # penalty damper [N s/m]
+MP_DT = 4             # substep [s]
+MP_GRAVITY = 5        # [m/s^2]
+MP_FLOOR_MU = 6       # friction coefficient off the belts
+MP_TRACK = 7          # 1.0: accumulate activities
+MP_COLUMNS = 8
+
+# --- activity slots [J] (Rideout and Stein: integral of |power| dt per element class) ---
+A_SPRING = 0
+A_DAMPER = 1
+A_CONTACT_FRICTION = 2
+A_BELT = 3
+A_INERTIA = 4
+A_COLUMNS = 5
+
+# --- static shape table columns (float64, one row per shape) ---
+SH_NV = 0
+SH_OFF = 1
+SH_R = 2
+SH_E = 3
+SH_MU = 4
+SH_XMIN = 5
+SH_YMIN = 6
+SH_XMAX = 7
+SH_YMAX = 8
+SH_AX = 9             # first core vertex [m] (segments and pegs: used by the grid binning)
+SH_AY = 10
+SH_BX = 11            # second core vertex (pegs: the first again)
+SH_BY = 12
+SH_COLUMNS = 13
+
+# --- actuator state columns (float64, one row per actuator, rewritten every substep) ---
+AS_ACTIVE = 0
+AS_NV = 1
+AS_R = 2
+AS_VX = 3             # translation velocity [m/s]
+AS_VY = 4
+AS_W = 5              # angular velocity about the pivot [rad/s]
+AS_PX = 6             # pivot [m]
+AS_PY = 7
+AS_E = 8
+AS_MU = 9
+AS_XMIN = 10
+AS_YMIN = 11
+AS_XMAX = 12
+AS_YMAX = 13
+AS_COLUMNS = 14
+
+# --- contact record columns (float64 (capacity, CT_COLUMNS)); ``cidx`` (capacity, 2) holds
+# the part indices a and b (b = -1: fixed or kinematic body, its velocity in CT_BVX..CT_BW) ---
+CT_NX = 0             # unit normal, pointing to a
+CT_NY = 1
+CT_RAX = 2            # contact point relative to a's centre [m]
+CT_RAY = 3
+CT_RBX = 4            # relative to b's centre or the kinematic body's pivot [m]
+CT_RBY = 5
+CT_DEPTH = 6          # penetration at detection [m]
+CT_E = 7
+CT_MU_S = 8
+CT_MU_K = 9
+CT_V_T = 10
+CT_BVX = 11
+CT_BVY = 12
+CT_BW = 13
+# written by :func:`prepare_contacts` before the sweeps (off the sweeps' dependency chain)
+CT_IKN = 14           # 1 / normal effective mass [1/kg]
+CT_IKT = 15           # 1 / tangential effective mass [1/kg]
+CT_IKN_S = 16         # the same in the shock sweep (the downstream body fixed)
+CT_IKT_S = 17
+CT_SLOPE = 18         # (mu_k - mu_s) / v_t [s/m]
+CT_WA = 19            # position correction: share of a (fraction included) [-]
+CT_WB = 20
+CT_CNT = 21           # change of the tangential speed per unit normal impulse [1/kg]
+CT_CNT_S = 22         # the same in the shock sweep
+CT_FA_S = 23          # shock sweep: 1.0 if a moves (b counts as fixed), 0.0 if b moves
+CT_NEG_1PE = 24       # -(1 + e): the normal impulse factor of a bouncing contact
+CT_COLUMNS = 25
+
+# contact records per part slot
+CONTACTS_PER_PART = 8
