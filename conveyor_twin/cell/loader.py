@@ -1,6 +1,8 @@
 """Read a cell YAML file into validated :class:`~conveyor_twin.cell.model.Cell` dataclasses.
 
-YAML is parsed only with ``yaml.safe_load``. Unknown keys, wrong types, out-of-range values,
+YAML is parsed only with ``yaml.safe_load`` (the pure-Python parser: libyaml's recurses on the
+C stack and crashes the process on deeply nested text, where this one raises RecursionError,
+reported as a CellError). Unknown keys, wrong types, out-of-range values,
 missing required keys, duplicate names and dangling references are :class:`CellError` naming
 the file, the key path, the value and what was expected.
 """
@@ -20,6 +22,8 @@ from conveyor_twin.cell.model import (
 )
 
 DEFAULT_CELL_NAME = 'default_cell.yaml'
+#: Largest coordinate of a point or rectangle [m]: a cell spans at most 2 km in x and in y.
+COORDINATE_LIMIT = 1000.0
 _REQUIRED = object()
 _INF = math.inf
 T = TypeVar('T')
@@ -76,8 +80,8 @@ class _Reader:
         value = self.raw(key, default)
         if value is default and default is not _REQUIRED:
             return default
-        if not isinstance(value, str) or not value:
-            raise self.fail(key, value, 'a non-empty string')
+        if not isinstance(value, str) or not value or not value.isprintable():
+            raise self.fail(key, value, 'a non-empty string of printable characters')
         if choices is not None and value not in choices:
             raise self.fail(key, value, 'one of ' + ', '.join(repr(c) for c in choices))
         return value
@@ -97,9 +101,10 @@ class _Reader:
 
     def rect(self, key: str) -> Rect:
         value = self.raw(key)
-        ok = isinstance(value, list) and len(value) == 4 and all(_is_number(v) for v in value)
+        ok = isinstance(value, list) and len(value) == 4 and all(_is_coordinate(v) for v in value)
         if not ok or not (value[0] < value[2] and value[1] < value[3]):
-            raise self.fail(key, value, '[x_min, y_min, x_max, y_max] [m] with min < max')
+            raise self.fail(key, value, '[x_min, y_min, x_max, y_max] [m] with min < max, '
+                            f'each within +-{COORDINATE_LIMIT:g}')
         return (float(value[0]), float(value[1]), float(value[2]), float(value[3]))
 
     def section(self, key: str, required: bool = False) -> '_Reader':
@@ -125,11 +130,26 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+def _is_finite(value: Any) -> bool:
+    """Return True for an int or float that is a finite float (an int too large for a float
+    is not)."""
+    if not _is_number(value):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+def _is_coordinate(value: Any) -> bool:
+    return _is_finite(value) and abs(value) <= COORDINATE_LIMIT
+
+
 def _check_number(reader: _Reader, key: str, value: Any, low: float, high: float,
                   low_open: bool) -> float:
     bracket = '(' if low_open else '['
     expected = f'a finite number in {bracket}{low:g}, {high:g}]'
-    if not _is_number(value) or not math.isfinite(value):
+    if not _is_finite(value):
         raise reader.fail(key, value, expected)
     if value < low or value > high or (low_open and value == low):
         raise reader.fail(key, value, expected)
@@ -138,8 +158,9 @@ def _check_number(reader: _Reader, key: str, value: Any, low: float, high: float
 
 def _check_point(file: str, path: str, value: Any) -> Point:
     if (not isinstance(value, list) or len(value) != 2
-            or not all(_is_number(v) and math.isfinite(v) for v in value)):
-        raise CellError(file, path, value, 'a point [x, y] of two finite numbers [m]')
+            or not all(_is_coordinate(v) for v in value)):
+        raise CellError(file, path, value, 'a point [x, y] of two finite numbers [m] within '
+                        f'+-{COORDINATE_LIMIT:g}')
     return (float(value[0]), float(value[1]))
 
 
@@ -447,6 +468,9 @@ def load_cell_text(text: str, source_file: str = '<memory>') -> Cell:
     """
     try:
         data = yaml.safe_load(text)
+    except RecursionError:
+        raise CellError(source_file, '<document>', text[:40] + '...',
+                        'YAML nested less deeply (the parser ran out of stack)') from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f'line {mark.line + 1}, column {mark.column + 1}' if mark else '<document>'
