@@ -1,4 +1,4 @@
-"""Fuzzing the cell loader: mutated cells give a Cell with valid values or a CellError, nothing else.
+"""Fuzzing the cell loader: a mutated cell gives a Cell of valid values or a CellError, no other.
 
 Each input is the default cell (or the micro benchmark's cell) with one to three seeded
 mutations: a key or list item deleted, a value of another type, NaN, +-inf, huge floats and
@@ -6,8 +6,8 @@ integers beyond a float, an unknown key, a deeply nested value, a name with NUL 
 characters, a very long string. Every input goes through ``cell_from_mapping`` and, where it
 can be written as YAML, through ``load_cell_text``. Any exception other than
 :class:`~conveyor_twin.cell.CellError` fails, and so does an accepted cell holding a value no
-cell may hold (:func:`invalid_values`). A large file (a thousand obstacles and as many barriers) and
-deeply nested YAML text are tried beside.
+cell may hold (:func:`invalid_values`). A large file (a thousand obstacles and as many
+barriers) and deeply nested YAML text are tried beside.
 
 :data:`FAST_INPUTS` inputs run by default; the slow-marked test runs :data:`SLOW_INPUTS`.
 """
