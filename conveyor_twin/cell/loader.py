@@ -494,6 +494,6 @@ def load_cell(path: Optional[Union[str, Path]] = None) -> Cell:
     path = Path(path)
     try:
         text = path.read_text('utf-8')
-    except (OSError, UnicodeDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # ValueError: undecodable bytes, a NUL in the path
         raise CellError(str(path), '<file>', str(exc), 'a readable UTF-8 YAML file') from None
     return load_cell_text(text, str(path))

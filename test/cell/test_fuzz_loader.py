@@ -223,6 +223,13 @@ def test_deeply_nested_text_is_a_cell_error(depth):
             load_cell_text(text, '<fuzz>')
 
 
+@pytest.mark.parametrize('path', ['a\x00b.yaml', '/', '\x00', 'x' * 5000])
+def test_unreadable_cell_paths_are_cell_errors(path):
+    from conveyor_twin.cell import load_cell
+    with pytest.raises(CellError, match=r'<file>: got .*expected a readable UTF-8 YAML file'):
+        load_cell(path)
+
+
 @pytest.mark.parametrize('value', [10 ** 400, -10 ** 400, math.inf, 1e308, 1001.0])
 def test_coordinates_beyond_the_limit_are_refused(value):
     doc = copy.deepcopy(BASES[0])
