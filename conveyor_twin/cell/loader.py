@@ -293,7 +293,7 @@ def _source(r: _Reader, part_names: Sequence[str]) -> Source:
         pattern=r.string('pattern', 'uniform', choices=SOURCE_PATTERNS),
         burst_size=r.integer('burst_size', 1, low=1, high=100000),
         velocity=velocity, yaw=yaw,
-        start_time=r.number('start_time', 0.0, low=0.0),
+        start_time=r.number('start_time', 0.0, low=0.0, high=1e7),
         max_parts=r.integer('max_parts', 0),
         seed=r.integer('seed', 0),
     )
@@ -358,13 +358,14 @@ def _zone(r: _Reader) -> Zone:
     region = r.rect('region')
     resolution = r.number('resolution', 0.01, low=0.0, high=1.0, low_open=True)
     a = r.section('auto')
-    to_micro = a.number('to_micro_density', 1500.0, low=0.0)
+    to_micro = a.number('to_micro_density', 1500.0, low=0.0, high=1e7)
     auto = AutoSwitch(
         tile=a.number('tile', 0.25, low=resolution, high=100.0),
-        to_macro_density=a.number('to_macro_density', 4000.0, low=to_micro, low_open=True),
+        to_macro_density=a.number('to_macro_density', 4000.0, low=to_micro, high=1e7,
+                                  low_open=True),
         to_micro_density=to_micro,
-        min_dwell=a.number('min_dwell', 0.5, low=0.0),
-        sensor_margin=a.number('sensor_margin', 0.1, low=0.0),
+        min_dwell=a.number('min_dwell', 0.5, low=0.0, high=1e6),
+        sensor_margin=a.number('sensor_margin', 0.1, low=0.0, high=100.0),
         free_flow_slip=a.number('free_flow_slip', 0.0, low=0.0, high=1.0),
     )
     a.done()
@@ -378,8 +379,9 @@ def _micro(r: _Reader) -> MicroModel:
         capacity=r.integer('capacity', 20000, low=1, high=10_000_000),
         penetration_slop=r.number('penetration_slop', 1e-4, low=0.0, high=0.01),
         penetration_correction=r.number('penetration_correction', 0.8, low=0.0, high=1.0),
-        penalty_stiffness=r.number('penalty_stiffness', 1e5, low=0.0, low_open=True),
-        penalty_damping=r.number('penalty_damping', 5.0, low=0.0),
+        penalty_stiffness=r.number('penalty_stiffness', 1e5, low=0.0, high=1e9,
+                                   low_open=True),
+        penalty_damping=r.number('penalty_damping', 5.0, low=0.0, high=1e6),
         max_travel_fraction=r.number('max_travel_fraction', 0.5, low=0.0, high=1.0,
                                      low_open=True),
     )
@@ -391,9 +393,9 @@ def _macro(r: _Reader) -> MacroModel:
     model = MacroModel(
         variant=r.string('variant', 'goettlich', choices=MACRO_VARIANTS),
         scheme=r.string('scheme', 'upwind', choices=MACRO_SCHEMES),
-        rho_max=r.number('rho_max', 0.0, low=0.0),
-        epsilon=r.number('epsilon', 0.5, low=0.0),
-        mollifier_width=r.number('mollifier_width', 0.0, low=0.0),
+        rho_max=r.number('rho_max', 0.0, low=0.0, high=1e7),
+        epsilon=r.number('epsilon', 0.5, low=0.0, high=1e3),
+        mollifier_width=r.number('mollifier_width', 0.0, low=0.0, high=10.0),
         cfl=r.number('cfl', 0.9, low=0.0, high=1.0, low_open=True),
     )
     r.done()
