@@ -302,3 +302,30 @@ def test_record_flushes_itself_when_the_writer_thread_is_behind(tmp_path):
     finally:
         stats = rec.close()
     assert stats.topics['/clock'].recorded == step and stats.dropped == 0
+
+
+def test_memory_per_chunk_stays_small(tmp_path):
+    import tracemalloc
+    rec = McapRecorder(tmp_path / 'run.mcap', flush_period=None, flush_sim_period_ns=DT_NS)
+    for topic, type_name in (('/clock', 'rosgraph_msgs/msg/Clock'),
+                             ('/parts', 'conveyor_twin_msgs/msg/PartStates')):
+        rec.add_topic(topic, type_name)
+    clock = cdr.encode_clock(0)
+    chunks = 3000
+
+    def record(first):
+        for i in range(first, first + chunks):   # a chunk per step (sim-time flush)
+            rec.record('/clock', i * DT_NS, clock)
+            rec.record('/parts', i * DT_NS, clock)
+        while rec.queued():
+            __import__('time').sleep(0.01)
+
+    record(0)
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    record(chunks)
+    grown = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    rec.close()
+    assert grown < chunks * 400, grown / chunks     # bytes kept per chunk until close
+    assert reader.info(tmp_path / 'run.mcap')['topics']['/clock']['count'] == 2 * chunks
