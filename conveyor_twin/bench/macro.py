@@ -48,9 +48,12 @@ cells).
 
 Ratios NumPy / numba in the same run (``conveyor-twin bench macro``, load 2.6-2.8): free
 capped upwind 4.8x, capped upwind in the jam 3.7x, Göttlich upwind in the jam 1.75x (NumPy's
-step has no cap, no operator and no bookkeeping). PyClaw could not be installed on this
-machine (clawpack builds its Fortran kernels with meson and no gfortran is present), so its
-ratio is reported as skipped.
+step has no cap, no operator and no bookkeeping).
+
+The PyClaw peer needs clawpack, whose Fortran kernels are built at install time: install a
+Fortran compiler, then clawpack into the environment (Debian/Ubuntu:
+``sudo apt-get install gfortran`` and ``.venv/bin/pip install clawpack``); without it the
+PyClaw row is reported as skipped. The benchmark installs nothing itself.
 """
 
 import argparse
@@ -196,7 +199,8 @@ def run(grids: List[str], steps: int) -> Dict[str, dict]:
             row['pyclaw'] = None
             row['pyclaw_error'] = f'{type(exc).__name__}: {exc}'
         if row['pyclaw'] is None and 'pyclaw_error' not in row:
-            row['pyclaw_error'] = 'clawpack is not installed (pip install clawpack needs gfortran)'
+            row['pyclaw_error'] = ('clawpack is not installed (apt-get install gfortran, then '
+                                  'pip install clawpack)')
         results[spec] = row
     return results
 
