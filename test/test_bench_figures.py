@@ -1,4 +1,5 @@
-"""The bench's machine figures: CPU stolen by the hypervisor, and clock gaps of a reading loop."""
+"""The bench's machine figures: CPU stolen by the hypervisor, clock gaps of a reading loop, the
+paced floor loop and the twin's overruns as a ratio to it."""
 
 import numpy as np
 
@@ -37,3 +38,32 @@ def test_clock_gaps_see_a_sleep_of_the_reading_thread():
     gaps = clock_gaps(0.5)
     hold.join()
     assert gaps.size >= 1 and gaps.max() > 2e6
+
+
+def test_paced_floor_keeps_every_deadline_it_counts():
+    from conveyor_twin.bench.host import paced_floor
+    result = paced_floor(0.2)
+    assert result['steps'] == 200 and result['period_ns'] == 1_000_000
+    assert 0 <= result['overruns'] <= result['steps']
+    assert result['policy'] in ('SCHED_FIFO', 'normal (SCHED_FIFO refused)')
+
+
+def test_paced_floor_counts_an_impossible_period_as_overruns():
+    from conveyor_twin.bench.host import paced_floor
+    # a 1 ns period: every deadline has passed before the loop looks at the clock again
+    result = paced_floor(1e-4, period_ns=1, priority=0)
+    assert result['steps'] == 100_000 and result['overruns'] > 90_000
+    assert result['policy'] == 'normal'
+
+
+def test_twin_overruns_as_a_ratio_to_the_floor():
+    from conveyor_twin.bench.twin import compare_to_floor
+    before = {'overruns': 2, 'duration_s': 30.0}
+    after = {'overruns': 4, 'duration_s': 30.0}
+    figures = {'overruns_in_window': 12, 'window_s': 60.0}
+    compare_to_floor(figures, before, after)
+    assert figures['floor']['overruns_per_min'] == 6.0 and figures['overruns_per_min'] == 12.0
+    assert figures['overruns_vs_floor'] == 2.0
+    quiet = {'overruns_in_window': 3, 'window_s': 60.0}
+    compare_to_floor(quiet, {'overruns': 0, 'duration_s': 30.0}, None)
+    assert quiet['overruns_vs_floor'] is None and quiet['floor']['overruns_per_min'] == 0.0

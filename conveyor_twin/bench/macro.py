@@ -20,9 +20,12 @@ the collision operator only within r + 1 cells of full cells.
 
 Ratios NumPy / numba in the same run (``conveyor-twin bench macro``, load 2.6-2.8): free
 capped upwind 4.8x, capped upwind in the jam 3.7x, Göttlich upwind in the jam 1.75x (NumPy's
-step has no cap, no operator and no bookkeeping). PyClaw needs clawpack, whose Fortran kernels
-are built with gfortran at install time (docs/benchmarks.md); without it its rows are reported
-as skipped.
+step has no cap, no operator and no bookkeeping).
+
+The PyClaw peer needs clawpack, whose Fortran kernels are built at install time: install a
+Fortran compiler, then clawpack into the environment (Debian/Ubuntu:
+``sudo apt-get install gfortran`` and ``.venv/bin/pip install clawpack``); without it the
+PyClaw row is reported as skipped. The benchmark installs nothing itself.
 """
 
 import argparse
@@ -168,7 +171,8 @@ def run(grids: List[str], steps: int) -> Dict[str, dict]:
             row['pyclaw'] = None
             row['pyclaw_error'] = f'{type(exc).__name__}: {exc}'
         if row['pyclaw'] is None and 'pyclaw_error' not in row:
-            row['pyclaw_error'] = 'clawpack is not installed (pip install clawpack needs gfortran)'
+            row['pyclaw_error'] = ('clawpack is not installed (apt-get install gfortran, then '
+                                  'pip install clawpack)')
         results[spec] = row
     return results
 

@@ -20,7 +20,13 @@ Both readers keep 1000 samples per stream, so "lost" counts what the twin did no
 - overruns and step times from the twin's ``diagnostics`` (1 Hz) during the window, and the
   twin's closing summary.
 
-Targets: 0 overruns, >= 999 Hz per stream, p99 <= 1.5 ms, no loss.
+The host's floor (``bench host``: a C loop paced exactly like the twin's stepping thread, doing
+no work) runs for ``--floor-window`` seconds before the first twin window and after every twin
+window, so floor and twin windows interleave; the twin's overruns per minute are reported as a
+ratio to those of the floor windows beside it (1: the twin loses no deadline the machine would
+have kept; the floor's own overruns are time the kernel or the hypervisor took from any loop).
+
+Targets: 0 overruns beyond the floor, >= 999 Hz per stream, p99 <= 1.5 ms, no loss.
 """
 
 import argparse
@@ -335,6 +341,36 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
     return figures
 
 
+def floor_figures(window: Optional[Dict[str, object]]) -> Optional[Dict[str, object]]:
+    """Run the paced floor loop for a window of ``window['seconds']``; None without one."""
+    if not window or window.get('seconds', 0) <= 0:
+        return None
+    from conveyor_twin.bench.host import paced_floor
+    try:
+        return paced_floor(float(window['seconds']))
+    except RuntimeError as exc:
+        return {'error': str(exc)}
+
+
+def compare_to_floor(figures: Dict[str, object], before: Optional[Dict[str, object]],
+                     after: Optional[Dict[str, object]]) -> None:
+    """Add the floor windows around a twin window and the ratio of overrun rates to ``figures``.
+
+    ``overruns_vs_floor``: (twin overruns per minute) / (floor overruns per minute of the
+    windows before and after); None when the floor saw no overrun (then compare counts).
+    """
+    windows = [w for w in (before, after) if w and 'overruns' in w]
+    figures['floor'] = {'windows': [w for w in (before, after) if w]}
+    if not windows or 'overruns_in_window' not in figures:
+        return
+    floor_rate = (sum(int(w['overruns']) for w in windows) * 60.0
+                  / sum(float(w['duration_s']) for w in windows))
+    twin_rate = int(figures['overruns_in_window']) * 60.0 / float(figures['window_s'])
+    figures['floor']['overruns_per_min'] = round(floor_rate, 2)
+    figures['overruns_per_min'] = round(twin_rate, 2)
+    figures['overruns_vs_floor'] = round(twin_rate / floor_rate, 2) if floor_rate else None
+
+
 def _print(figures: Dict[str, object]) -> None:
     print(f"{figures['layout']}: {figures.get('placed_parts')} parts placed, window "
           f"{figures.get('window_s')} s, micro parts in flight "
@@ -355,6 +391,15 @@ def _print(figures: Dict[str, object]) -> None:
           f"(median of 1 s windows) {figures.get('step_time_mean_ms_median')} ms, p99 (worst "
           f"window) {figures.get('step_time_p99_ms_max')} ms, max "
           f"{figures.get('step_time_max_ms_max')} ms")
+    floor = figures.get('floor') or {}
+    if floor.get('windows'):
+        counts = [w.get('overruns', w.get('error')) for w in floor['windows']]
+        ratio = figures.get('overruns_vs_floor')
+        print(f"  host floor (paced C loop, {floor['windows'][0].get('policy')}) before/after: "
+              f"{counts} overruns in {[w.get('duration_s') for w in floor['windows']]} s = "
+              f"{floor.get('overruns_per_min')} per min; twin {figures.get('overruns_per_min')} "
+              f"per min; twin / floor "
+              f"{ratio if ratio is not None else 'n/a (the floor saw no overrun)'}")
     print(f"  twin summary: {figures.get('twin_summary')}")
     if 'twin_log_tail' in figures:
         print(f"  twin ended early: {figures['twin_ended_early']}; its log ends:\n"
@@ -379,16 +424,26 @@ def main(argv: List[str]) -> int:
                         'callback: one rclpy callback per message, timed in Python')
     p.add_argument('--markers-rate', type=float, default=30.0,
                    help="the twin's MarkerArray rate [Hz] (0: none)")
+    p.add_argument('--floor-window', type=float, default=30.0,
+                   help='paced floor loop before the first and after every twin window [s] '
+                        '(0: none)')
+    p.add_argument('--rounds', type=int, default=1, help='twin windows per layout')
     p.add_argument('--json', action='store_true', help='print one JSON object')
     args = p.parse_args(argv)
     layouts = {'composed': [False], 'split': [True], 'both': [False, True]}[args.layout]
     results = []
+    floor_window = {'seconds': args.floor_window}
     with tempfile.TemporaryDirectory() as directory:
-        for split in layouts:
-            figures = run_layout(split, args, directory)
-            results.append(figures)
-            if not args.json:
-                _print(figures)
+        before = floor_figures(floor_window)
+        for _ in range(max(1, args.rounds)):
+            for split in layouts:
+                figures = run_layout(split, args, directory)
+                after = floor_figures(floor_window)
+                compare_to_floor(figures, before, after)
+                before = after
+                results.append(figures)
+                if not args.json:
+                    _print(figures)
     if args.json:
         print(json.dumps({'parts': args.parts, 'duration_s': args.duration,
                           'layouts': results}))

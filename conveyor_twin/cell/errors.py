@@ -1,6 +1,14 @@
 """Errors raised while reading a cell description."""
 
+import reprlib
 from typing import Any
+
+# values are shown shortened: a deeply nested or huge value still gives a readable message
+_REPR = reprlib.Repr()
+_REPR.maxlevel = 4
+_REPR.maxstring = 80
+_REPR.maxother = 80
+_REPR.maxlong = 40
 
 
 class CellError(ValueError):
@@ -11,5 +19,5 @@ class CellError(ValueError):
         self.key_path = key_path
         self.value = value
         self.expected = expected
-        msg = f'{file}: {key_path}: got {value!r}; expected {expected}'
+        msg = f'{file}: {key_path}: got {_REPR.repr(value)}; expected {expected}'
         super().__init__(msg)

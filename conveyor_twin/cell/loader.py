@@ -1,6 +1,8 @@
 """Read a cell YAML file into validated :class:`~conveyor_twin.cell.model.Cell` dataclasses.
 
-YAML is parsed only with ``yaml.safe_load``. Unknown keys, wrong types, out-of-range values,
+YAML is parsed only with ``yaml.safe_load`` (the pure-Python parser: libyaml's recurses on the
+C stack and crashes the process on deeply nested text, where this one raises RecursionError,
+reported as a CellError). Unknown keys, wrong types, out-of-range values,
 missing required keys, duplicate names and dangling references are :class:`CellError` naming
 the file, the key path, the value and what was expected.
 """
@@ -21,6 +23,8 @@ from conveyor_twin.cell.model import (
 )
 
 DEFAULT_CELL_NAME = 'default_cell.yaml'
+#: Largest coordinate of a point or rectangle [m]: a cell spans at most 2 km in x and in y.
+COORDINATE_LIMIT = 1000.0
 _REQUIRED = object()
 _INF = math.inf
 T = TypeVar('T')
@@ -77,8 +81,8 @@ class _Reader:
         value = self.raw(key, default)
         if value is default and default is not _REQUIRED:
             return default
-        if not isinstance(value, str) or not value:
-            raise self.fail(key, value, 'a non-empty string')
+        if not isinstance(value, str) or not value or not value.isprintable():
+            raise self.fail(key, value, 'a non-empty string of printable characters')
         if choices is not None and value not in choices:
             raise self.fail(key, value, 'one of ' + ', '.join(repr(c) for c in choices))
         return value
@@ -98,9 +102,10 @@ class _Reader:
 
     def rect(self, key: str) -> Rect:
         value = self.raw(key)
-        ok = isinstance(value, list) and len(value) == 4 and all(_is_number(v) for v in value)
+        ok = isinstance(value, list) and len(value) == 4 and all(_is_coordinate(v) for v in value)
         if not ok or not (value[0] < value[2] and value[1] < value[3]):
-            raise self.fail(key, value, '[x_min, y_min, x_max, y_max] [m] with min < max')
+            raise self.fail(key, value, '[x_min, y_min, x_max, y_max] [m] with min < max, '
+                            f'each within +-{COORDINATE_LIMIT:g}')
         return (float(value[0]), float(value[1]), float(value[2]), float(value[3]))
 
     def section(self, key: str, required: bool = False) -> '_Reader':
@@ -126,11 +131,26 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+def _is_finite(value: Any) -> bool:
+    """Return True for an int or float that is a finite float (an int too large for a float
+    is not)."""
+    if not _is_number(value):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+def _is_coordinate(value: Any) -> bool:
+    return _is_finite(value) and abs(value) <= COORDINATE_LIMIT
+
+
 def _check_number(reader: _Reader, key: str, value: Any, low: float, high: float,
                   low_open: bool) -> float:
     bracket = '(' if low_open else '['
     expected = f'a finite number in {bracket}{low:g}, {high:g}]'
-    if not _is_number(value) or not math.isfinite(value):
+    if not _is_finite(value):
         raise reader.fail(key, value, expected)
     if value < low or value > high or (low_open and value == low):
         raise reader.fail(key, value, expected)
@@ -139,8 +159,9 @@ def _check_number(reader: _Reader, key: str, value: Any, low: float, high: float
 
 def _check_point(file: str, path: str, value: Any) -> Point:
     if (not isinstance(value, list) or len(value) != 2
-            or not all(_is_number(v) and math.isfinite(v) for v in value)):
-        raise CellError(file, path, value, 'a point [x, y] of two finite numbers [m]')
+            or not all(_is_coordinate(v) for v in value)):
+        raise CellError(file, path, value, 'a point [x, y] of two finite numbers [m] within '
+                        f'+-{COORDINATE_LIMIT:g}')
     return (float(value[0]), float(value[1]))
 
 
@@ -273,7 +294,7 @@ def _source(r: _Reader, part_names: Sequence[str]) -> Source:
         pattern=r.string('pattern', 'uniform', choices=SOURCE_PATTERNS),
         burst_size=r.integer('burst_size', 1, low=1, high=100000),
         velocity=velocity, yaw=yaw,
-        start_time=r.number('start_time', 0.0, low=0.0),
+        start_time=r.number('start_time', 0.0, low=0.0, high=1e7),
         max_parts=r.integer('max_parts', 0),
         seed=r.integer('seed', 0),
     )
@@ -338,13 +359,14 @@ def _zone(r: _Reader) -> Zone:
     region = r.rect('region')
     resolution = r.number('resolution', 0.01, low=0.0, high=1.0, low_open=True)
     a = r.section('auto')
-    to_micro = a.number('to_micro_density', 1500.0, low=0.0)
+    to_micro = a.number('to_micro_density', 1500.0, low=0.0, high=1e7)
     auto = AutoSwitch(
         tile=a.number('tile', 0.25, low=resolution, high=100.0),
-        to_macro_density=a.number('to_macro_density', 4000.0, low=to_micro, low_open=True),
+        to_macro_density=a.number('to_macro_density', 4000.0, low=to_micro, high=1e7,
+                                  low_open=True),
         to_micro_density=to_micro,
-        min_dwell=a.number('min_dwell', 0.5, low=0.0),
-        sensor_margin=a.number('sensor_margin', 0.1, low=0.0),
+        min_dwell=a.number('min_dwell', 0.5, low=0.0, high=1e6),
+        sensor_margin=a.number('sensor_margin', 0.1, low=0.0, high=100.0),
         free_flow_slip=a.number('free_flow_slip', 0.0, low=0.0, high=1.0),
     )
     a.done()
@@ -358,8 +380,9 @@ def _micro(r: _Reader) -> MicroModel:
         capacity=r.integer('capacity', 20000, low=1, high=10_000_000),
         penetration_slop=r.number('penetration_slop', 1e-4, low=0.0, high=0.01),
         penetration_correction=r.number('penetration_correction', 0.8, low=0.0, high=1.0),
-        penalty_stiffness=r.number('penalty_stiffness', 1e5, low=0.0, low_open=True),
-        penalty_damping=r.number('penalty_damping', 5.0, low=0.0),
+        penalty_stiffness=r.number('penalty_stiffness', 1e5, low=0.0, high=1e9,
+                                   low_open=True),
+        penalty_damping=r.number('penalty_damping', 5.0, low=0.0, high=1e6),
         max_travel_fraction=r.number('max_travel_fraction', 0.5, low=0.0, high=1.0,
                                      low_open=True),
     )
@@ -371,9 +394,9 @@ def _macro(r: _Reader) -> MacroModel:
     model = MacroModel(
         variant=MacroVariant(r.string('variant', 'goettlich', choices=MACRO_VARIANTS)),
         scheme=MacroScheme(r.string('scheme', 'upwind', choices=MACRO_SCHEMES)),
-        rho_max=r.number('rho_max', 0.0, low=0.0),
-        epsilon=r.number('epsilon', 0.5, low=0.0),
-        mollifier_width=r.number('mollifier_width', 0.0, low=0.0),
+        rho_max=r.number('rho_max', 0.0, low=0.0, high=1e7),
+        epsilon=r.number('epsilon', 0.5, low=0.0, high=1e3),
+        mollifier_width=r.number('mollifier_width', 0.0, low=0.0, high=10.0),
         cfl=r.number('cfl', 0.9, low=0.0, high=1.0, low_open=True),
     )
     r.done()
@@ -449,6 +472,9 @@ def load_cell_text(text: str, source_file: str = '<memory>') -> Cell:
     """
     try:
         data = yaml.safe_load(text)
+    except RecursionError:
+        raise CellError(source_file, '<document>', text[:40] + '...',
+                        'YAML nested less deeply (the parser ran out of stack)') from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f'line {mark.line + 1}, column {mark.column + 1}' if mark else '<document>'
@@ -472,6 +498,6 @@ def load_cell(path: Optional[Union[str, Path]] = None) -> Cell:
     path = Path(path)
     try:
         text = path.read_text('utf-8')
-    except (OSError, UnicodeDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # ValueError: undecodable bytes, a NUL in the path
         raise CellError(str(path), '<file>', str(exc), 'a readable UTF-8 YAML file') from None
     return load_cell_text(text, str(path))

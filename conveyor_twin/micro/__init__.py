@@ -4,9 +4,10 @@
 modules. Imports numpy and numba only (no ROS).
 """
 
-from conveyor_twin.micro.errors import CapacityError, MicroError, SpawnOverlapError
+from conveyor_twin.micro.errors import (CapacityError, MicroError, SpawnBoundsError,
+                                        SpawnOverlapError)
 from conveyor_twin.micro.sim import EdgeEvents, MicroSim
 from conveyor_twin.micro.state import PartsView
 
 __all__ = ['CapacityError', 'EdgeEvents', 'MicroError', 'MicroSim', 'PartsView',
-           'SpawnOverlapError']
+           'SpawnBoundsError', 'SpawnOverlapError']

@@ -11,3 +11,7 @@ class SpawnOverlapError(MicroError, ValueError):
 
 class CapacityError(MicroError):
     """The preallocated part capacity is exhausted."""
+
+
+class SpawnBoundsError(MicroError, ValueError):
+    """An explicit placement lies outside the cell's extent (nothing placed)."""

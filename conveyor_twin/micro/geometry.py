@@ -110,6 +110,24 @@ def world_bounds(cell: Cell, shapes: np.ndarray,
     return (min(xs), min(ys), max(xs), max(ys))
 
 
+def cell_extent(cell: Cell, shapes: np.ndarray) -> Tuple[float, float, float, float]:
+    """Return (x_min, y_min, x_max, y_max) of the cell [m]: everything parts can reach (belts,
+    sources, sinks, obstacles, actuators' reach) and its zones."""
+    x0, y0, x1, y1 = world_bounds(cell, shapes, None)
+    for zone in cell.zones:
+        x0, y0 = min(x0, zone.region[0]), min(y0, zone.region[1])
+        x1, y1 = max(x1, zone.region[2]), max(y1, zone.region[3])
+    return (x0, y0, x1, y1)
+
+
+def outside_extent(extent: Tuple[float, float, float, float], x: np.ndarray,
+                   y: np.ndarray) -> np.ndarray:
+    """Return the indices of the points (x, y) [m] outside ``extent`` (non-finite ones too)."""
+    x0, y0, x1, y1 = extent
+    inside = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+    return np.flatnonzero(~inside)
+
+
 def _segment_distance(px: float, py: float, ax: float, ay: float, bx: float,
                       by: float) -> float:
     """Return the distance from point p to the segment a-b [m]."""

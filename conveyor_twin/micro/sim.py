@@ -28,8 +28,9 @@ from conveyor_twin.micro.contacts import (A_BELT, A_COLUMNS, A_CONTACT_FRICTION,
                                           MP_FLOOR_MU, MP_GRAVITY, MP_SLOP, MP_STIFFNESS, MP_TRACK,
                                           NB_BUILDS, grid_table, neighbour_arrays, scratch)
 from conveyor_twin.micro.drive import belt_table, BT_DV, FLOOR_FRICTION
-from conveyor_twin.micro.errors import CapacityError, SpawnOverlapError
-from conveyor_twin.micro.geometry import build_grid, obstacle_shapes, world_bounds
+from conveyor_twin.micro.errors import CapacityError, SpawnBoundsError, SpawnOverlapError
+from conveyor_twin.micro.geometry import (build_grid, cell_extent, obstacle_shapes,
+                                          outside_extent, world_bounds)
 from conveyor_twin.micro.kernel import (AV_LIMIT, AV_POSITION, AV_PREVIOUS, AV_SUB, AV_TARGET,
                                         BV_LIMIT, BV_SPEED, BV_TARGET, CF_AUTO_SUB, CF_COLUMNS,
                                         CF_DT, CF_FLOOR_MU, CF_MAX_SUB, CF_MAX_TRAVEL, CF_MODE,
@@ -169,6 +170,8 @@ class MicroSim:
         # obstacles and grid
         self.shapes, self.shape_verts, self.shape_owner = obstacle_shapes(cell.obstacles)
         bounds = world_bounds(cell, self.shapes, region)
+        #: (x_min, y_min, x_max, y_max) [m] where :meth:`spawn` may place parts
+        self.extent = cell_extent(cell, self.shapes)
         # cells and static lists grown by the neighbour list's skin (update_pairs)
         self.grid = build_grid(bounds, max_brad, self.cfg[CF_SKIN], self.shapes)
         cap = self.state.capacity
@@ -303,11 +306,14 @@ class MicroSim:
         """Place parts of type index ``part_type`` at the given poses; return their ids.
 
         Arguments broadcast to a common length. Poses overlapping a part (also one placed
-        earlier in the same call), an obstacle or a solid actuator are refused.
+        earlier in the same call), an obstacle or a solid actuator are refused, and so are
+        centres outside the cell's extent (:attr:`extent`: belts, sources, sinks, obstacles,
+        actuators' reach and zones) or not finite, and non-finite yaw or velocities.
 
         :param x: [m]. :param y: [m]. :param yaw: [rad]. :param vx: [m/s]. :param wz: [rad/s].
-        :param strict: ``True``: place all or nothing, raising :class:`SpawnOverlapError`
-            naming the refused indices; ``False``: refused entries get id 0.
+        :param strict: ``True``: place all or nothing, raising :class:`SpawnBoundsError` or
+            :class:`SpawnOverlapError` naming the refused indices; ``False``: refused entries
+            get id 0.
         :return: uint32 ids.
         :raises CapacityError: when the capacity cannot hold them.
         """
@@ -321,9 +327,16 @@ class MicroSim:
         if self.n + count > self.state.capacity:
             msg = f'{count} parts do not fit: {self.n} of {self.state.capacity} slots used'
             raise CapacityError(msg)
+        outside = self.outside(arrays[0], arrays[1])
+        unfinite = np.flatnonzero(~np.isfinite(np.stack(arrays[2:])).all(axis=0))
+        if strict and (outside.size or unfinite.size):
+            raise SpawnBoundsError(self._bounds_message(t, arrays, outside, unfinite))
         s = self.state
         ids = np.zeros(count, dtype=np.uint32)
+        skip = set(outside.tolist()) | set(unfinite.tolist())
         for k in range(count):
+            if k in skip:
+                continue
             px, py, pyaw, pvx, pvy, pwz = (float(a[k]) for a in arrays)
             ids[k] = place(t, px, py, _wrap(pyaw), pvx, pvy, pwz, s.counters, s.ids,
                            s.part_type, s.P, self.pt, self.shapes, self.shape_verts,
@@ -339,6 +352,26 @@ class MicroSim:
                    'actuator; nothing placed')
             raise SpawnOverlapError(msg)
         return ids
+
+    def outside(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Return the indices of centres (x, y) [m] outside :attr:`extent` or not finite."""
+        return outside_extent(self.extent, np.asarray(x, dtype=np.float64),
+                              np.asarray(y, dtype=np.float64))
+
+    def _bounds_message(self, t: int, arrays, outside: np.ndarray,
+                        unfinite: np.ndarray) -> str:
+        x0, y0, x1, y1 = self.extent
+        count = arrays[0].size
+        parts = [f'spawn of {count} {self.cell.part_types[t].name!r} parts refused:']
+        if outside.size:
+            k = int(outside[0])
+            parts.append(f'entries {outside.tolist()[:20]} lie outside the cell (e.g. entry '
+                         f'{k} at x = {arrays[0][k]:g} m, y = {arrays[1][k]:g} m; the cell '
+                         f'spans x {x0:g}..{x1:g} m, y {y0:g}..{y1:g} m)')
+        if unfinite.size:
+            parts.append(f'entries {unfinite.tolist()[:20]} have a yaw or velocity that is '
+                         'not a finite number')
+        return ' '.join(parts) + '; nothing placed'
 
     def place_one(self, part_type: int, x: float, y: float, yaw: float, vx: float, vy: float,
                   wz: float) -> int:

@@ -4,8 +4,14 @@
 queue (decimation and the queue bound are applied there, and a full queue drops the message
 and counts it per topic); a writer thread drains the queue into MCAP chunks and closes a chunk
 at least every ``flush_period`` seconds of wall time and/or every ``flush_sim_period_ns`` of
-simulation time, so a killed process loses at most the messages of that period (plus one wake
-of the writer thread, :data:`POLL_PERIOD`). The data are not fsync'ed: a killed process loses
+simulation time. The writer thread closes a chunk every half ``flush_period``
+(:data:`WRITER_FLUSH_SHARE`); should it fall behind (a stepping thread that never sleeps holds
+the GIL, a loaded machine does not schedule it), the producer itself drains the queue and
+closes the chunk in ``record()`` once the last flush began :data:`FORCED_FLUSH_SHARE` of the
+period ago. So whatever the scheduling, everything handed to ``record()`` more than
+``flush_period`` of the process's running time before a kill is in the file, and the queue never
+holds more than a flush period of messages (a producer that outpaces the disk is slowed to the
+disk's pace rather than losing messages). The data are not fsync'ed: a killed process loses
 nothing the kernel has, a power cut may.
 
 The file is what rosbag2's MCAP storage plugin writes: profile ``ros2``, schema encoding
@@ -62,6 +68,12 @@ DEFAULT_FLUSH_PERIOD = 0.1
 DEFAULT_QUEUE_SIZE = 20000
 #: Longest sleep of the writer thread [s] while waiting for messages.
 POLL_PERIOD = 0.002
+#: The writer thread closes a chunk when the last flush began this share of ``flush_period`` ago.
+WRITER_FLUSH_SHARE = 0.5
+#: ``record()`` drains and flushes itself when the last flush began this share of
+#: ``flush_period`` ago (the writer thread fell behind); the rest of the period bounds the time
+#: that drain and flush take.
+FORCED_FLUSH_SHARE = 0.8
 #: rosbag2 metadata version written into the ``rosbag2`` metadata record.
 ROSBAG2_METADATA_VERSION = 9
 ROS_DISTRO = 'kilted'
@@ -84,11 +96,14 @@ class TopicStats:
 
 @dataclass
 class RecorderStats:
-    """Counters of a recorder; ``error`` is set if the writer thread failed."""
+    """Counters of a recorder; ``error`` is set if the writer thread failed;
+    ``forced_flushes`` counts the flushes ``record()`` made because the writer thread was
+    behind."""
 
     path: str
     topics: Dict[str, TopicStats] = field(default_factory=dict)
     error: Optional[str] = None
+    forced_flushes: int = 0
 
     @property
     def dropped(self) -> int:
@@ -97,7 +112,7 @@ class RecorderStats:
 
     def as_dict(self) -> Dict[str, Any]:
         """Return the counters as plain data (for JSON)."""
-        return {'path': self.path, 'error': self.error,
+        return {'path': self.path, 'error': self.error, 'forced_flushes': self.forced_flushes,
                 'topics': {name: dict(vars(t)) for name, t in self.topics.items()}}
 
 
@@ -162,10 +177,14 @@ class McapRecorder:
         self.compression = compression if compression != '' else 'none'
         self._flush_period = flush_period
         self._flush_sim = flush_sim_period_ns
-        # flush deadlines a poll period early, so that wake-up jitter keeps the spacing of the
-        # flushes within flush_period
-        self._flush_spacing = max(flush_period - POLL_PERIOD, flush_period / 2) \
-            if flush_period else 0.0
+        self._flush_spacing = flush_period * WRITER_FLUSH_SHARE if flush_period else 0.0
+        # record() flushes itself past this age of the last flush [s] (inf: never)
+        self._force_age = flush_period * FORCED_FLUSH_SHARE if flush_period else float('inf')
+        # monotonic time [s] at which the last flush began: everything queued before it is in
+        # the file stream
+        self._flushed_mark = time.monotonic()
+        # one drainer at a time: the writer thread or a producer flushing itself
+        self._io = threading.Lock()
         self._queue_size = queue_size
         self._selection = None if topics is None else frozenset(topics)
         self._decimation = dict(decimation or {})
@@ -270,7 +289,27 @@ class McapRecorder:
             stats.dropped += 1
             return False
         self._queue.append((t.index, log_time_ns, data, stats.offered))
+        if time.monotonic() - self._flushed_mark >= self._force_age:
+            self._flush_behind()
         return True
+
+    def _flush_behind(self) -> None:
+        """Drain and flush from the producer's thread: the writer thread is behind.
+
+        Waits for a drain of the writer thread in progress; does nothing once the recorder
+        failed or is closing (errors are reported by :meth:`close`).
+        """
+        if self._error is not None or self._closing:
+            return
+        with self._io:
+            if self._error is not None or \
+                    time.monotonic() - self._flushed_mark < self._force_age:
+                return  # the writer thread flushed meanwhile
+            try:
+                self._flush_queued()
+                self.stats.forced_flushes += 1
+            except BaseException as err:  # noqa: BLE001 - reported by close()
+                self._fail(err)
 
     def record_accepted_command(self, kind: str, effective_time_ns: int, data: bytes) -> None:
         """Record an accepted command (never dropped).
@@ -302,10 +341,12 @@ class McapRecorder:
         t.channel_id = self._file.add_channel(t.name, MessageEncoding.CDR, schema_id, metadata)
 
     def _drain(self) -> None:
-        """Write every queued item; close a chunk whenever simulation time crossed a period."""
+        """Write the items queued when called (not those queued meanwhile, so a drain ends
+        however fast the producer is); close a chunk whenever simulation time crossed a
+        period. Call with ``_io`` held."""
         queue, by_index, add = self._queue, self._by_index, self._file.add_message
         sim_period = self._flush_sim
-        while queue:
+        for _ in range(len(queue)):
             item = queue.popleft()
             index = item[0]
             if index == _REGISTER:
@@ -328,23 +369,36 @@ class McapRecorder:
                 self._on_thread_start()
             except Exception:  # noqa: BLE001 - a refused priority changes no data
                 pass
-        next_flush = time.monotonic() + self._flush_spacing if self._flush_period \
-            else float('inf')
+        spacing = self._flush_spacing if self._flush_period else float('inf')
         try:
             while True:
                 closing = self._closing
-                self._drain()
-                now = time.monotonic()
-                if now >= next_flush:
-                    self._file.flush()
-                    next_flush = now + self._flush_spacing
+                with self._io:
+                    if self._error is not None:
+                        break
+                    if time.monotonic() - self._flushed_mark >= spacing:
+                        self._flush_queued()
+                    else:
+                        self._drain()
+                    wait = max(0.0, self._flushed_mark + spacing - time.monotonic())
                 if closing and not self._queue:
                     break
-                self._wake.wait(min(POLL_PERIOD, max(0.0, next_flush - now)))
+                self._wake.wait(min(POLL_PERIOD, wait))
         except BaseException as err:  # noqa: BLE001 - reported by close()
-            self._error = err
-            self.stats.error = f'{type(err).__name__}: {err}'
-            self._queue.clear()
+            self._fail(err)
+
+    def _flush_queued(self) -> None:
+        """Write everything queued now and close the chunk; call with ``_io`` held."""
+        mark = time.monotonic()
+        self._drain()
+        self._file.flush()
+        self._flushed_mark = mark
+
+    def _fail(self, err: BaseException) -> None:
+        """Keep the writer's error for :meth:`close` and stop queueing work for it."""
+        self._error = err
+        self.stats.error = f'{type(err).__name__}: {err}'
+        self._queue.clear()
 
     # -- closing ------------------------------------------------------------------------------
     def close(self) -> RecorderStats:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conveyor_twin.cell.model import Actuator, Sink, Source
-from conveyor_twin.micro import MicroSim, SpawnOverlapError
+from conveyor_twin.micro import MicroSim, SpawnBoundsError, SpawnOverlapError
 from test.micro.conftest import disc, make_cell, wall
 
 
@@ -24,6 +24,25 @@ def test_spawn_refuses_overlap_and_ids_are_never_reused():
     assert list(sim.parts_view().id) == [1, 3]              # order kept
     assert list(sim.spawn(0, 0.2, 0.0, 0.0)) == [4]
     assert sim.counters()['removed'] == 1
+
+
+def test_spawn_refuses_parts_outside_the_cell():
+    cell = make_cell(sinks=(Sink(name='bin', region=(0.8, -0.6, 1.0, -0.3)),))
+    sim = MicroSim(cell, seed=0)
+    assert sim.extent == pytest.approx((0.0, -0.6, 2.0, 0.25))  # the belt and the bin
+    with pytest.raises(SpawnBoundsError, match=r'entries \[1, 2\] lie outside the cell '
+                       r'\(e\.g\. entry 1 at x = 1e\+06 m, y = 1e\+06 m; the cell spans '
+                       r'x 0\.\.2 m, y -0\.6\.\.0\.25 m\); nothing placed'):
+        sim.spawn(0, [0.5, 1e6, -0.1], [0.0, 1e6, 0.0], 0.0)
+    for x, y in ((2.01, 0.0), (0.5, 0.3), (np.nan, 0.0), (0.5, np.inf)):
+        with pytest.raises(SpawnBoundsError, match=r'entries \[0\] lie outside'):
+            sim.spawn(0, x, y, 0.0)
+    with pytest.raises(SpawnBoundsError, match=r'entries \[0\] have a yaw or velocity'):
+        sim.spawn(0, 0.5, 0.0, np.nan)
+    assert sim.n == 0 and sim.entered == 0                  # nothing placed
+    # not strict: the entries outside get id 0, the others are placed; the bin is in the cell
+    ids = sim.spawn(0, [0.5, 1e6, 0.9], [0.0, 0.0, -0.45], 0.0, strict=False)
+    assert list(ids) == [1, 0, 2] and sim.n == 2
 
 
 def test_sinks_count_and_balance():

@@ -262,3 +262,70 @@ def test_recorder_errors(tmp_path):
     with pytest.raises(RecordingError, match='closed'):
         rec.add_topic('/y', 'rosgraph_msgs/msg/Clock')
     assert reader.info(tmp_path / 'x.mcap')['complete']
+
+
+class _Asleep:
+    """Stands in for the writer thread's wake-up event: the thread sleeps until close."""
+
+    def __init__(self):
+        import threading
+        self._event = threading.Event()
+
+    def wait(self, timeout=None):
+        return self._event.wait(30.0)
+
+    def set(self):
+        self._event.set()
+
+
+def test_record_flushes_itself_when_the_writer_thread_is_behind(tmp_path):
+    import time
+    path = tmp_path / 'run.mcap'
+    flush_period = 0.05
+    rec = McapRecorder(path, chunk_size=64 << 20, flush_period=flush_period)
+    rec.add_topic('/clock', 'rosgraph_msgs/msg/Clock')
+    rec._wake = _Asleep()  # the writer thread never runs again before close
+    recorded_at = []
+    try:
+        step = 0
+        while not recorded_at or recorded_at[-1] - recorded_at[0] < 6 * flush_period:
+            rec.record('/clock', step * DT_NS, cdr.encode_clock(step * DT_NS))
+            recorded_at.append(time.monotonic())
+            step += 1
+            time.sleep(0.001)
+        in_file = [m.log_time // DT_NS for m in reader.read_messages(path, linear=True)
+                   if m.topic == '/clock']
+        # every message recorded more than a flush period before the last one is in the file
+        older = sum(1 for t in recorded_at if t <= recorded_at[-1] - flush_period)
+        assert older > 0 and in_file[:older] == list(range(older))
+        assert rec.stats.forced_flushes >= 3
+    finally:
+        stats = rec.close()
+    assert stats.topics['/clock'].recorded == step and stats.dropped == 0
+
+
+def test_memory_per_chunk_stays_small(tmp_path):
+    import tracemalloc
+    rec = McapRecorder(tmp_path / 'run.mcap', flush_period=None, flush_sim_period_ns=DT_NS)
+    for topic, type_name in (('/clock', 'rosgraph_msgs/msg/Clock'),
+                             ('/parts', 'conveyor_twin_msgs/msg/PartStates')):
+        rec.add_topic(topic, type_name)
+    clock = cdr.encode_clock(0)
+    chunks = 3000
+
+    def record(first):
+        for i in range(first, first + chunks):   # a chunk per step (sim-time flush)
+            rec.record('/clock', i * DT_NS, clock)
+            rec.record('/parts', i * DT_NS, clock)
+        while rec.queued():
+            __import__('time').sleep(0.01)
+
+    record(0)
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    record(chunks)
+    grown = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    rec.close()
+    assert grown < chunks * 400, grown / chunks     # bytes kept per chunk until close
+    assert reader.info(tmp_path / 'run.mcap')['topics']['/clock']['count'] == 2 * chunks

@@ -18,7 +18,8 @@ from test.ros_env import ros_subprocess_env
 @pytest.mark.parametrize('reader', ['poll', 'callback'])
 def test_bench_twin_measures_every_stream(reader):
     argv = [sys.executable, '-m', 'conveyor_twin.cli', 'bench', 'twin', '--duration', '2',
-            '--settle', '0.5', '--parts', '100', '--reader', reader, '--json']
+            '--settle', '0.5', '--parts', '100', '--reader', reader, '--floor-window', '0.5',
+            '--json']
     done = subprocess.run(argv, env=ros_subprocess_env(), capture_output=True, text=True,
                           timeout=240)
     assert done.returncode == 0, done.stderr[-2000:]
@@ -34,3 +35,7 @@ def test_bench_twin_measures_every_stream(reader):
         assert stream['out_of_order'] == 0, (topic, stream)
         assert stream['interarrival_p50_ms'] > 0.0, (topic, stream)
     assert figures['twin_summary']['steps'] > 0
+    # the paced floor ran before and after the twin's window, 500 deadlines each
+    windows = figures['floor']['windows']
+    assert [w['steps'] for w in windows] == [500, 500], windows
+    assert figures['overruns_per_min'] >= 0 and figures['floor']['overruns_per_min'] >= 0

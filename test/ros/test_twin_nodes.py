@@ -153,6 +153,19 @@ def test_spawn_rejects_bad_requests(harness):
     assert len(cdr.decode_part_states(harness.probe.received['parts'][-1]).id) == 0
 
 
+def test_spawn_refuses_parts_outside_the_cell(harness):
+    far = harness.call(harness.spawn_client, SpawnParts.Request(
+        part_type='spacer', x=[1.0, 1e6], y=[0.0, 1e6], yaw=[0.0, 0.0]))
+    assert not far.success and list(far.id) == []
+    assert 'entries [1] lie outside the cell' in far.message, far.message
+    assert 'x = 1e+06 m, y = 1e+06 m' in far.message and 'nothing placed' in far.message
+    harness.step(1)
+    assert len(cdr.decode_part_states(harness.probe.received['parts'][-1]).id) == 0
+    inside = harness.call(harness.spawn_client, SpawnParts.Request(
+        part_type='spacer', x=[1.0], y=[0.0], yaw=[0.0]))
+    assert inside.success and len(inside.id) == 1, inside.message
+
+
 def test_reset_restarts_at_step_zero(harness):
     harness.step(10)
     response = harness.call(harness.reset_client, Reset.Request(cell_file='', seed=11))

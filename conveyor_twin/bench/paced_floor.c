@@ -1,0 +1,84 @@
+/*
+ * paced_floor: a loop paced exactly like the twin's stepping thread, doing no work.
+ *
+ * Absolute deadlines t0 + k * period on CLOCK_MONOTONIC; before each deadline the loop sleeps
+ * with clock_nanosleep(TIMER_ABSTIME) to SPIN_NS before it, then spins to the deadline; a step
+ * that ends after its deadline is an overrun and the late steps run back to back (no skipping),
+ * as the twin's pacer does. Under SCHED_FIFO when permitted. Whatever overruns this loop sees,
+ * no 1 kHz loop on the machine can avoid: it is the host's floor.
+ *
+ * usage: paced_floor SECONDS [PERIOD_NS] [FIFO_PRIORITY]
+ * prints one JSON object: steps, overruns, max lateness [ns], wake-ups later than the spin
+ * margin, the scheduling policy obtained.
+ */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <sched.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#define SLEEP_MIN_NS 200000LL /* sleep only when the deadline is further than this [ns] */
+#define SPIN_NS 150000LL      /* wake this long before the deadline, then spin [ns] */
+
+static int64_t now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+static void sleep_until(int64_t t)
+{
+    struct timespec ts = {.tv_sec = t / 1000000000LL, .tv_nsec = t % 1000000000LL};
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR) {
+    }
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 2) {
+        fprintf(stderr, "usage: paced_floor SECONDS [PERIOD_NS] [FIFO_PRIORITY]\n");
+        return 2;
+    }
+    double seconds = atof(argv[1]);
+    int64_t period = argc > 2 ? atoll(argv[2]) : 1000000LL;
+    int priority = argc > 3 ? atoi(argv[3]) : 10;
+    if (seconds <= 0 || period <= 0) {
+        fprintf(stderr, "paced_floor: SECONDS and PERIOD_NS must be positive\n");
+        return 2;
+    }
+    const char *policy = "normal";
+    if (priority > 0) {
+        struct sched_param param = {.sched_priority = priority};
+        policy = sched_setscheduler(0, SCHED_FIFO, &param) == 0 ? "SCHED_FIFO" :
+                 "normal (SCHED_FIFO refused)";
+    }
+    int64_t steps = (int64_t)(seconds * 1e9 / (double)period);
+    int64_t overruns = 0, late_wakes = 0, max_lateness = 0;
+    int64_t start = now_ns();
+    for (int64_t k = 1; k <= steps; k++) {
+        int64_t deadline = start + k * period;
+        int64_t t = now_ns();
+        if (t > deadline) {
+            overruns++;
+            if (t - deadline > max_lateness)
+                max_lateness = t - deadline;
+            continue;
+        }
+        if (deadline - t > SLEEP_MIN_NS) {
+            sleep_until(deadline - SPIN_NS);
+            if (now_ns() > deadline)
+                late_wakes++;
+        }
+        while (now_ns() < deadline) {
+        }
+    }
+    printf("{\"steps\": %lld, \"overruns\": %lld, \"max_lateness_ns\": %lld, "
+           "\"late_wakes\": %lld, \"period_ns\": %lld, \"policy\": \"%s\"}\n",
+           (long long)steps, (long long)overruns, (long long)max_lateness,
+           (long long)late_wakes, (long long)period, policy);
+    return 0;
+}
