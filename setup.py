@@ -35,5 +35,9 @@ setup(
             'macro_simulator = conveyor_twin.ros.macro_node:main',
             'scale_coordinator = conveyor_twin.ros.coordinator_node:main',
         ],
+        # pytest loads the fixtures of conveyor_twin.testing in every project that installs it.
+        'pytest11': [
+            'conveyor_twin = conveyor_twin.testing.plugin',
+        ],
     },
 )

@@ -12,6 +12,7 @@ BENCHES = {
     'twin': 'conveyor_twin.bench.twin',
     'scale': 'conveyor_twin.bench.scale',
     'host': 'conveyor_twin.bench.host',
+    'testing': 'conveyor_twin.bench.testing',
 }
 
 

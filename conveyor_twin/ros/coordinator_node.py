@@ -36,6 +36,7 @@ from conveyor_twin.wire import cdr
 REMOTE_STEP_TIMEOUT = 10.0        # s a split scale node may take to report a step done
 COUNTERS_TIMEOUT = 2.0            # s the split scale nodes may take to send their counters
 LOG_THROTTLE = 1.0                # s between two logged rejections
+COMMAND_STATUS_TOPIC = 'command_status'
 
 
 class CoordinatorNode(Node):
@@ -71,6 +72,10 @@ class CoordinatorNode(Node):
         self.belt_pub = self.create_publisher(BeltStates, 'belt_states', STREAM_QOS)
         self.actuator_pub = self.create_publisher(ActuatorStates, 'actuator_states', STREAM_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, 'diagnostics', SLOW_QOS)
+        #: One status per command received: accepted (level OK) or rejected (ERROR, with the
+        #: reason), so a sender learns the outcome of each command it published.
+        self.command_status_pub = self.create_publisher(DiagnosticStatus, COMMAND_STATUS_TOPIC,
+                                                        STREAM_QOS)
         self._pub_clock = raw_publish(self.clock_pub, self.get_logger())
         self._pub_belts = raw_publish(self.belt_pub, self.get_logger())
         self._pub_actuators = raw_publish(self.actuator_pub, self.get_logger())
@@ -225,17 +230,35 @@ class CoordinatorNode(Node):
             self.get_logger().warning(
                 f'{exc} (rejected, not applied; {self.twin.commands.rejected_total} so far)')
 
+    def _report(self, topic: str, target: str, value: float,
+                error: Optional[CommandRejected]) -> None:
+        """Publish the outcome of one command on ``command_status`` (``step``: the step index
+        when it arrived; an accepted command takes effect at the next step)."""
+        step = self.twin.step_index
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.ERROR if error else DiagnosticStatus.OK, name=topic,
+            message=str(error) if error else 'accepted', hardware_id=target,
+            values=[KeyValue(key='value', value=repr(float(value))),
+                    KeyValue(key='step', value=str(step))])
+        self.command_status_pub.publish(status)
+
     def _on_belt_command(self, msg: BeltCommand) -> None:
+        error = None
         try:
             self.twin.commands.submit_belt(msg.belt, msg.speed)
         except CommandRejected as exc:
+            error = exc
             self._rejected(exc)
+        self._report('belt_command', msg.belt, msg.speed, error)
 
     def _on_actuator_command(self, msg: ActuatorCommand) -> None:
+        error = None
         try:
             self.twin.commands.submit_actuator(msg.actuator, msg.position)
         except CommandRejected as exc:
+            error = exc
             self._rejected(exc)
+        self._report('actuator_command', msg.actuator, msg.position, error)
 
     # -- services ------------------------------------------------------------------------
     def _on_step(self, request: Step.Request, response: Step.Response) -> Step.Response:
