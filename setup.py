@@ -37,5 +37,9 @@ setup(
             'macro_simulator = conveyor_twin.ros.macro_node:main',
             'scale_coordinator = conveyor_twin.ros.split:coordinator_main',
         ],
+        # pytest loads the fixtures of conveyor_twin.testing in every project that installs it.
+        'pytest11': [
+            'conveyor_twin = conveyor_twin.testing.plugin',
+        ],
     },
 )

@@ -143,6 +143,11 @@ STEP = Topic('step', _SRVS + 'Step', _V, COMMAND_QOS, Rate.ON_DEMAND, Stamp.NONE
 RESET = Topic('reset', _SRVS + 'Reset', _V, COMMAND_QOS, Rate.ON_DEMAND, Stamp.NONE, _COORD)
 SPAWN_PARTS = Topic('spawn_parts', _SRVS + 'SpawnParts', _V, COMMAND_QOS, Rate.ON_DEMAND,
                     Stamp.NONE, _COORD)
+#: The outcome of every command received: level OK (accepted, takes effect at the next step) or
+#: ERROR (rejected, never applied; ``message`` is the reason), ``name`` the command topic,
+#: ``hardware_id`` the belt or actuator, values ``value`` and ``step`` (when it arrived).
+COMMAND_STATUS = Topic('command_status', 'diagnostic_msgs/msg/DiagnosticStatus', _S,
+                       COMMAND_QOS, Rate.ON_DEMAND, Stamp.NONE, _COORD, default=False)
 
 #: Every stream the twin emits.
 STREAMS: Tuple[Topic, ...] = (PARTS, DENSITY, LIGHT_BARRIERS, LIGHT_BARRIER_EDGES, BELT_STATES,
@@ -151,10 +156,12 @@ STREAMS: Tuple[Topic, ...] = (PARTS, DENSITY, LIGHT_BARRIERS, LIGHT_BARRIER_EDGE
 COMMANDS: Tuple[Topic, ...] = (BELT_COMMAND, ACTUATOR_COMMAND)
 #: Every service the twin serves.
 SERVICES: Tuple[Topic, ...] = (STEP, RESET, SPAWN_PARTS)
-#: Topics (streams and commands) by name, as written above.
-TOPICS: Dict[str, Topic] = {t.name: t for t in STREAMS + COMMANDS}
+#: Answers to commands, published when a command arrives (not part of a step's frame).
+REPLIES: Tuple[Topic, ...] = (COMMAND_STATUS,)
+#: Topics (streams, commands and replies) by name, as written above.
+TOPICS: Dict[str, Topic] = {t.name: t for t in STREAMS + COMMANDS + REPLIES}
 #: Every entry of the contract by name.
-CONTRACT: Dict[str, Topic] = {t.name: t for t in STREAMS + COMMANDS + SERVICES}
+CONTRACT: Dict[str, Topic] = {t.name: t for t in STREAMS + COMMANDS + REPLIES + SERVICES}
 
 
 def produced_by(producer: Producer) -> Tuple[Topic, ...]:

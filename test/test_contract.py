@@ -29,15 +29,17 @@ def test_every_interface_entry_is_in_the_table_once():
     entries = contract.STREAMS + contract.COMMANDS + contract.SERVICES
     assert len({t.name for t in entries}) == len(entries)
     # markers are the one stream beyond the design's list (viewer data, not recorded by default)
-    assert set(contract.CONTRACT) == set(INTERFACE) | {'markers'}
+    # and the answers to commands (command_status), also off the design's list
+    assert set(contract.CONTRACT) == set(INTERFACE) | {'markers', 'command_status'}
     for name, (short, kind) in INTERFACE.items():
         topic = contract.CONTRACT[name]
         assert topic.type_name.split('/')[-1] == short and topic.kind is kind, name
-    assert not contract.MARKERS.default and all(
+    assert not contract.MARKERS.default and not contract.COMMAND_STATUS.default and all(
         t.default for t in contract.STREAMS + contract.COMMANDS if t is not contract.MARKERS)
 
 
-@pytest.mark.parametrize('topic', contract.STREAMS + contract.COMMANDS, ids=lambda t: t.name)
+@pytest.mark.parametrize('topic', contract.STREAMS + contract.COMMANDS + contract.REPLIES,
+                         ids=lambda t: t.name)
 def test_every_topic_type_has_a_schema_with_the_fields_of_msg_defs(topic):
     assert topic.type_name in schemas.SCHEMAS
     package, _, name = topic.type_name.split('/')

@@ -13,6 +13,7 @@ BENCHES = {
     'scale': 'conveyor_twin.bench.scale',
     'host': 'conveyor_twin.bench.host',
     'soak': 'conveyor_twin.bench.soak',
+    'testing': 'conveyor_twin.bench.testing',
 }
 
 

@@ -33,7 +33,7 @@ from conveyor_twin.coord.twin import Twin
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.producers import CoordinatorOutput
 from conveyor_twin.ros import coupling
-from conveyor_twin.ros.endpoints import create_service, create_subscription
+from conveyor_twin.ros.endpoints import create_publisher, create_service, create_subscription
 from conveyor_twin.ros.params import declare_twin_parameters
 from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures
 from conveyor_twin.ros.stream_publisher import StreamPublisher
@@ -80,6 +80,9 @@ class CoordinatorNode(Node):
         self.belt_pub = self.streams.publishers[contract.BELT_STATES]
         self.actuator_pub = self.streams.publishers[contract.ACTUATOR_STATES]
         self.diag_pub = self.streams.publishers[contract.DIAGNOSTICS]
+        #: One status per command received: accepted (level OK) or rejected (ERROR, with the
+        #: reason), so a sender learns the outcome of each command it published.
+        self.command_status_pub = create_publisher(self, contract.COMMAND_STATUS)
         create_subscription(self, contract.BELT_COMMAND, self._on_belt_command)
         create_subscription(self, contract.ACTUATOR_COMMAND, self._on_actuator_command)
         create_service(self, contract.STEP, self._on_step)
@@ -227,17 +230,35 @@ class CoordinatorNode(Node):
             self.get_logger().warning(
                 f'{exc} (rejected, not applied; {self.twin.commands.rejected_total} so far)')
 
+    def _report(self, topic: str, target: str, value: float,
+                error: Optional[CommandRejected]) -> None:
+        """Publish the outcome of one command on ``command_status`` (``step``: the step index
+        when it arrived; an accepted command takes effect at the next step)."""
+        step = self.twin.step_index
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.ERROR if error else DiagnosticStatus.OK, name=topic,
+            message=str(error) if error else 'accepted', hardware_id=target,
+            values=[KeyValue(key='value', value=repr(float(value))),
+                    KeyValue(key='step', value=str(step))])
+        self.command_status_pub.publish(status)
+
     def _on_belt_command(self, msg: BeltCommand) -> None:
+        error = None
         try:
             self.twin.commands.submit_belt(msg.belt, msg.speed)
         except CommandRejected as exc:
+            error = exc
             self._rejected(exc)
+        self._report('belt_command', msg.belt, msg.speed, error)
 
     def _on_actuator_command(self, msg: ActuatorCommand) -> None:
+        error = None
         try:
             self.twin.commands.submit_actuator(msg.actuator, msg.position)
         except CommandRejected as exc:
+            error = exc
             self._rejected(exc)
+        self._report('actuator_command', msg.actuator, msg.position, error)
 
     # -- services ------------------------------------------------------------------------
     def _on_step(self, request: Step.Request, response: Step.Response) -> Step.Response:

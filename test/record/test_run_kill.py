@@ -26,7 +26,8 @@ import pytest
 from conveyor_twin.record import reader
 from conveyor_twin.wire import cdr
 from .kill_twin import RING
-from ..ros_env import remove_dead_shm_files, RosProcesses, SHM_MIN_AGE
+from conveyor_twin.testing import remove_dead_shm_files, RosProcesses
+from conveyor_twin.testing.shm import SHM_MIN_AGE
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -12,7 +12,7 @@ import sys
 import pytest
 
 from conveyor_twin.bench.twin import STREAMS
-from test.ros_env import ros_subprocess_env
+from conveyor_twin.testing import ros_subprocess_env
 
 
 @pytest.mark.parametrize('reader', ['poll', 'callback'])

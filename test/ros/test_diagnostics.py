@@ -7,8 +7,8 @@ from conveyor_twin.cell import load_cell
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.ros.compose import ComposedTwin
 from conveyor_twin.ros.qos import SLOW_QOS
-from test.ros.twin_driver import Driver, TIMEOUT
-from test.ros_env import wait_for
+from conveyor_twin.testing.driver import Driver, TIMEOUT
+from conveyor_twin.testing import wait_for
 
 pytestmark = pytest.mark.ros
 KEYS = {'step', 'mode', 'step_time_mean_ms', 'step_time_p99_ms', 'step_time_max_ms',

@@ -18,7 +18,7 @@ from typing import Any, Dict, List, Tuple
 import numpy as np
 import pytest
 
-from ..ros_env import wait_for
+from conveyor_twin.testing import wait_for
 
 pytestmark = pytest.mark.ros
 

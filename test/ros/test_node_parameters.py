@@ -5,7 +5,7 @@ import pytest
 from conveyor_twin.cell import load_cell
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.ros.compose import ComposedTwin
-from test.ros.twin_driver import Driver
+from conveyor_twin.testing import Driver
 
 pytestmark = pytest.mark.ros
 NODES = ('/scale_coordinator', '/micro_simulator', '/macro_simulator')

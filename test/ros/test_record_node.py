@@ -14,7 +14,7 @@ from conveyor_twin.record.writer import McapRecorder
 from conveyor_twin.ros.record_node import message_class, RecordNode
 from conveyor_twin.wire import cdr
 
-from ..ros_env import wait_for
+from conveyor_twin.testing import wait_for
 
 pytestmark = pytest.mark.ros
 

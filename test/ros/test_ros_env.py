@@ -11,9 +11,10 @@ from typing import Any, Dict, Set
 
 import pytest
 
-from ..ros_env import (claim_domain_id, dead_shm_files, DOMAIN_IDS, DOMAIN_LOCK_DIR,
-                       DOMAIN_LOCK_PREFIX, remove_dead_shm_files, ros_subprocess_env, SHM_DIR,
-                       wait_for)
+from conveyor_twin.testing.ros_env import (claim_domain_id, DOMAIN_IDS, DOMAIN_LOCK_DIR,
+                                           DOMAIN_LOCK_PREFIX, lease_domain_id,
+                                           ros_subprocess_env, wait_for)
+from conveyor_twin.testing.shm import dead_shm_files, remove_dead_shm_files, SHM_DIR
 
 ECHO_SCRIPT = Path(__file__).with_name('echo_subscriber.py')
 CHILD_TIMEOUT = 60.0  # start and discovery of a child process [s]
@@ -37,6 +38,21 @@ def test_session_runs_in_a_claimed_private_domain() -> None:
              '    sys.exit(3)\n')
     result = subprocess.run([sys.executable, '-c', probe, str(lock)], timeout=CHILD_TIMEOUT)
     assert result.returncode == 3
+
+
+def test_leases_hold_distinct_domains_until_released() -> None:
+    first, second = lease_domain_id(), lease_domain_id()
+    try:
+        held = {claim_domain_id(), first.domain_id, second.domain_id}
+        assert len(held) == 3 and held <= set(DOMAIN_IDS)
+        taken = first.domain_id
+        first.release()
+        again = lease_domain_id(pid=DOMAIN_IDS.index(taken))  # search starts at the freed id
+        assert again.domain_id == taken
+        again.release()
+    finally:
+        first.release()
+        second.release()
 
 
 def test_wait_for_is_bounded() -> None:

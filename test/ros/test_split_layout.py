@@ -17,7 +17,7 @@ from conveyor_twin.ros.compose import ComposedTwin
 from conveyor_twin.ros.split import ros_args
 from conveyor_twin.wire import cdr
 from test.ros.test_node_parameters import check_parameters as check_node_parameters, NODES
-from test.ros.twin_driver import Driver
+from conveyor_twin.testing import Driver
 
 pytestmark = pytest.mark.ros
 SEED = 7

@@ -1,12 +1,15 @@
 """A probe node that listens to the twin like a user's controller does (raw CDR, contract QoS)."""
 
 import hashlib
-from typing import Dict, List
+import importlib
+from typing import Any, Dict, List, Optional, Sequence
 
+from rclpy.context import Context
 from rclpy.node import Node
 
-from conveyor_twin.ros.qos import CLOCK_QOS, EDGE_QOS, STREAM_QOS
+from conveyor_twin.ros.qos import CLOCK_QOS, COMMAND_QOS, EDGE_QOS, STREAM_QOS
 
+#: The twin's streams a probe listens to by default: ``{topic: (module, type, QoS)}``.
 STREAMS = {
     'parts': ('conveyor_twin_msgs.msg', 'PartStates', STREAM_QOS),
     'density': ('conveyor_twin_msgs.msg', 'DensityGrid', STREAM_QOS),
@@ -16,27 +19,39 @@ STREAMS = {
     'actuator_states': ('conveyor_twin_msgs.msg', 'ActuatorStates', STREAM_QOS),
     '/clock': ('rosgraph_msgs.msg', 'Clock', CLOCK_QOS),
 }
+#: More topics a probe can listen to: the twin's answer to each command, and the commands of
+#: every controller.
+COMMAND_TOPICS = {
+    'command_status': ('diagnostic_msgs.msg', 'DiagnosticStatus', STREAM_QOS),
+    'belt_command': ('conveyor_twin_msgs.msg', 'BeltCommand', COMMAND_QOS),
+    'actuator_command': ('conveyor_twin_msgs.msg', 'ActuatorCommand', COMMAND_QOS),
+}
 
 
-def _type(module: str, name: str):
-    import importlib
+def _type(module: str, name: str) -> Any:
     return getattr(importlib.import_module(module), name)
 
 
 class Probe(Node):
-    """Collect every message of the twin's streams as raw bytes, per topic, in arrival order."""
+    """Collect every message of the twin's streams as raw bytes, per topic, in arrival order.
 
-    def __init__(self, context, topics=tuple(STREAMS), name: str = 'probe') -> None:
+    :param context: rclpy context the node lives in
+    :param topics: topics to listen to (keys of :data:`STREAMS` and :data:`COMMAND_TOPICS`)
+    :param name: node name
+    """
+
+    def __init__(self, context: Context, topics: Sequence[str] = tuple(STREAMS),
+                 name: str = 'probe') -> None:
         super().__init__(name, context=context)
         self.received: Dict[str, List[bytes]] = {t: [] for t in topics}
         self._subs = []
         for topic in topics:
-            module, type_name, qos = STREAMS[topic]
+            module, type_name, qos = {**STREAMS, **COMMAND_TOPICS}[topic]
             self._subs.append(self.create_subscription(
                 _type(module, type_name), topic,
                 lambda data, t=topic: self.received[t].append(data), qos, raw=True))
 
-    def matched(self, topics=None) -> bool:
+    def matched(self, topics: Optional[Sequence[str]] = None) -> bool:
         """True once every listened topic (or those given) has a publisher."""
         wanted = topics or self.received
         return all(self.count_publishers(t) > 0 for t in wanted)

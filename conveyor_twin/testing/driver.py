@@ -1,0 +1,245 @@
+"""Drive a running twin (composed in this process or split over processes) like a controller.
+
+A :class:`Driver` owns a probe node and its own executor; it calls ``step`` in chunks and waits
+until every stream of each chunk has been delivered, sends commands and waits for the twin's
+answer on ``command_status`` (accepted, or rejected with the reason), and calls the
+``spawn_parts`` and ``reset`` services. It knows nothing of the layout it talks to.
+"""
+
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Union
+
+from conveyor_twin_msgs.msg import ActuatorCommand, BeltCommand
+from conveyor_twin_msgs.srv import Reset, SpawnParts, Step
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.context import Context
+from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
+from rclpy.serialization import deserialize_message
+
+from conveyor_twin.ros.qos import COMMAND_QOS
+from conveyor_twin.testing.errors import TwinTimeoutError
+from conveyor_twin.testing.probe import Probe, STREAMS
+from conveyor_twin.testing.ros_env import wait_for
+from conveyor_twin.wire import cdr
+
+TIMEOUT = 60.0  # longest wait for one service answer, one chunk's streams or one command [s]
+EVERY_STEP = ('parts', 'light_barriers', 'belt_states', 'actuator_states')
+HASHED = ('parts', 'density', 'light_barriers', 'light_barrier_edges', 'belt_states',
+          'actuator_states')
+LISTENED = tuple(STREAMS) + ('command_status', 'belt_command', 'actuator_command')
+
+
+class CommandResult(NamedTuple):
+    """The twin's answer to one command.
+
+    :param accepted: True when the command was valid (it takes effect at the next step)
+    :param reason: why it was rejected ('' when accepted)
+    :param step: the twin's step index when the command arrived
+    """
+
+    accepted: bool
+    reason: str
+    step: int
+
+
+def command_result(status: DiagnosticStatus) -> CommandResult:
+    """Return the :class:`CommandResult` a ``command_status`` message carries."""
+    values = {kv.key: kv.value for kv in status.values}
+    accepted = status.level == DiagnosticStatus.OK
+    return CommandResult(accepted, '' if accepted else status.message,
+                         int(values.get('step', -1)))
+
+
+def _command_key(topic: str, target: str, value: float) -> tuple:
+    return topic, target, repr(float(value))
+
+
+class Driver:
+    """A probe, clients and command publishers in one executor, against a twin's namespace.
+
+    :param context: rclpy context
+    :param density_per_step: density messages per step (one per macro zone of the cell)
+    :param name: name of the probe node
+    :param timeout: longest wait for one service answer, chunk of streams or command [s]
+    """
+
+    def __init__(self, context: Context, *, density_per_step: int = 0, name: str = 'probe',
+                 timeout: float = TIMEOUT) -> None:
+        self.density_per_step = density_per_step
+        self.timeout = timeout
+        self.probe = Probe(context, topics=LISTENED, name=name)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.probe)
+        self.step_client = self.probe.create_client(Step, 'step')
+        self.spawn_client = self.probe.create_client(SpawnParts, 'spawn_parts')
+        self.reset_client = self.probe.create_client(Reset, 'reset')
+        self.belt_pub = self.probe.create_publisher(BeltCommand, 'belt_command', COMMAND_QOS)
+        self.actuator_pub = self.probe.create_publisher(ActuatorCommand, 'actuator_command',
+                                                        COMMAND_QOS)
+
+    def wait_connected(self, timeout: Optional[float] = None) -> bool:
+        """Wait until every stream, service and command topic of the twin is matched."""
+        return wait_for(lambda: self.probe.matched() and self.step_client.service_is_ready()
+                        and self.spawn_client.service_is_ready()
+                        and self.reset_client.service_is_ready()
+                        and self.belt_pub.get_subscription_count() > 0
+                        and self.actuator_pub.get_subscription_count() > 0
+                        and all(s.get_publisher_count() > 0 for s in self.probe._subs
+                                if s.topic_name != '/clock'),
+                        self.timeout if timeout is None else timeout, self.executor)
+
+    def wait(self, condition: Callable[[], bool], what: str) -> None:
+        """Spin until ``condition`` holds; raise :class:`TwinTimeoutError` naming ``what``."""
+        if not wait_for(condition, self.timeout, self.executor):
+            raise TwinTimeoutError(f'{what}: not within {self.timeout:g} s '
+                                   f'(messages so far: {self.counts()})')
+
+    def call(self, client: Any, request: Any) -> Any:
+        """Call a service and return its response (bounded wait)."""
+        future = client.call_async(request)
+        self.executor.spin_until_future_complete(future, timeout_sec=self.timeout)
+        if not future.done():
+            raise TwinTimeoutError(f'service {client.srv_name} did not answer within '
+                                   f'{self.timeout:g} s')
+        return future.result()
+
+    def step(self, n: int, chunk: int = 50) -> Step.Response:
+        """Advance n steps in calls of at most ``chunk``; after each, wait for every stream of
+        those steps and for the twin's answer to every command seen so far."""
+        response = None
+        while n > 0:
+            k = min(n, chunk)
+            before = self.counts()
+            response = self.call(self.step_client, Step.Request(steps=k))
+            want = {t: before[t] + k for t in EVERY_STEP}
+            want['density'] = before['density'] + k * self.density_per_step
+            self.wait(lambda: all(len(self.probe.received[t]) >= c for t, c in want.items()),
+                      f'streams of steps up to {response.step}')
+            self.settle_commands()
+            n -= k
+        return response
+
+    def drain(self, limit: int = 100_000) -> None:
+        """Run every callback that is ready now, of the probe and of the nodes attached to the
+        executor (a controller in this process reacts to what was delivered)."""
+        for _ in range(limit):
+            try:
+                handler, _, _ = self.executor.wait_for_ready_callbacks(timeout_sec=0.0)
+            except (TimeoutException, ShutdownException):
+                return
+            handler()
+            exception = handler.exception()
+            if exception is not None:
+                raise exception
+
+    def settle_commands(self) -> None:
+        """Let attached nodes react, then wait until the twin answered every command seen on
+        the command topics so far; repeat until no new command appears."""
+        received = self.probe.received
+
+        def sent() -> int:
+            return len(received['belt_command']) + len(received['actuator_command'])
+
+        while True:
+            self.drain()
+            seen = sent()
+            self.wait(lambda: len(received['command_status']) >= seen,
+                      'answers on command_status to the commands sent')
+            self.drain()
+            if sent() == seen:
+                return
+
+    def counts(self) -> Dict[str, int]:
+        """Messages received so far per topic."""
+        return {t: len(v) for t, v in self.probe.received.items()}
+
+    def command(self, msg: Union[BeltCommand, ActuatorCommand]) -> CommandResult:
+        """Publish a belt or actuator command and wait for the twin's answer to it."""
+        if isinstance(msg, BeltCommand):
+            publisher, key = self.belt_pub, _command_key('belt_command', msg.belt, msg.speed)
+        else:
+            publisher = self.actuator_pub
+            key = _command_key('actuator_command', msg.actuator, msg.position)
+        statuses = self.probe.received['command_status']
+        seen = len(statuses)
+        found: List[CommandResult] = []
+
+        def answered() -> bool:
+            nonlocal seen
+            while seen < len(statuses):
+                status = deserialize_message(statuses[seen], DiagnosticStatus)
+                seen += 1
+                values = {kv.key: kv.value for kv in status.values}
+                if (status.name, status.hardware_id, values.get('value')) == key:
+                    found.append(command_result(status))
+                    return True
+            return False
+
+        publisher.publish(msg)
+        self.wait(answered, f'answer of the twin to {key[0]} {key[1]!r} = {key[2]}')
+        return found[0]
+
+    def spawn(self, part_type: str, x: Any, y: Any, yaw: Any) -> SpawnParts.Response:
+        """Place parts through the ``spawn_parts`` service; return its response."""
+        return self.call(self.spawn_client, SpawnParts.Request(
+            part_type=part_type, x=list(x), y=list(y), yaw=list(yaw)))
+
+    def reset(self, seed: int, cell_file: str = '') -> Reset.Response:
+        """Restart the twin through the ``reset`` service; return its response."""
+        return self.call(self.reset_client, Reset.Request(cell_file=cell_file, seed=seed))
+
+    def settle_edges(self) -> None:
+        """Wait until every edge counted in the last barrier state has arrived."""
+        received = self.probe.received
+        if not received['light_barriers']:
+            return
+        total = int(sum(cdr.decode_light_barrier_states(received['light_barriers'][-1])[5]))
+        self.wait(lambda: len(received['light_barrier_edges']) >= total,
+                  f'{total} light-barrier edges')
+
+    def run(self, sequence: Any) -> None:
+        """Play a sequence of ``('step', n)``, ``('command', msg)``, ``('spawn', args)``."""
+        for kind, arg in sequence:
+            if kind == 'step':
+                self.step(arg)
+            elif kind == 'command':
+                result = self.command(arg)
+                assert result.accepted, result.reason
+            elif kind == 'spawn':
+                response = self.spawn(*arg)
+                assert response.success, response.message
+            else:
+                raise ValueError(f'unknown sequence item {kind!r}')
+        self.settle_edges()
+
+    def digests(self) -> Dict[str, str]:
+        """SHA-256 of every hashed stream (everything but the best-effort /clock)."""
+        return {t: self.probe.digest(t) for t in HASHED}
+
+    def parameters(self, node_name: str) -> Dict[str, tuple]:
+        """List, describe and get a node's parameters through its parameter services (as
+        ``ros2 param dump``/``describe`` do); return ``{name: (value, description, read_only)}``.
+        """
+        from rclpy.parameter import parameter_value_to_python
+        from rclpy.parameter_client import AsyncParameterClient
+
+        client = AsyncParameterClient(self.probe, node_name)
+        self.wait(client.services_are_ready, f'parameter services of {node_name}')
+
+        def result(future: Any) -> Any:
+            self.executor.spin_until_future_complete(future, timeout_sec=self.timeout)
+            if not future.done():
+                raise TwinTimeoutError(f'parameter service of {node_name} timed out')
+            return future.result()
+
+        names = list(result(client.list_parameters()).result.names)
+        names = [n for n in names if n != 'use_sim_time']
+        values = result(client.get_parameters(names)).values
+        descriptors = result(client.describe_parameters(names)).descriptors
+        return {n: (parameter_value_to_python(v), d.description, d.read_only)
+                for n, v, d in zip(names, values, descriptors)}
+
+    def close(self) -> None:
+        """Destroy the probe and the executor."""
+        self.executor.remove_node(self.probe)
+        self.probe.destroy_node()
+        self.executor.shutdown(timeout_sec=5.0)
