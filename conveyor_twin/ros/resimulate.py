@@ -308,7 +308,7 @@ def _compare(path: str, twin: Any, tap: Any, step_ns: int, report: ResimReport,
             if queue or core.step_index > limit:
                 break
             for type_index, x, y, yaw in spawns.pop(core.step_index, ()):
-                twin.coordinator._spawn(type_index, x, y, yaw)
+                twin.micro_stage.spawn(type_index, x, y, yaw)
             core.step(1)
             report.steps = core.step_index
             for other in produced.values():  # keep memory bounded on topics not recorded
