@@ -28,8 +28,7 @@ from typing import Any, Deque, Dict, List, Optional, Tuple
 from conveyor_twin.cell import CellError, load_cell_text
 from conveyor_twin.contract import STREAMS
 from conveyor_twin.coord.commands import CommandRejected
-from conveyor_twin.coord.stages import MacroStage, MicroStage
-from conveyor_twin.coord.twin import Twin
+from conveyor_twin.coord.assembly import build_twin
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.markers import CellMarkers
 from conveyor_twin.output.producers import CoordinatorOutput, MacroOutput, MicroOutput
@@ -172,9 +171,8 @@ class _Rerun:
     """The cores of a recording's cell, stepped on demand, with the frames they emit."""
 
     def __init__(self, cell: Any, seed: int) -> None:
-        self.micro = MicroStage(cell, seed)
-        self.macro = MacroStage(cell)
-        self.twin = Twin(cell, seed=seed, stages=[self.micro, self.macro])
+        built = build_twin(cell, seed=seed)
+        self.micro, self.macro, self.twin = built.micro, built.macro, built.twin
         self.output = TwinOutput([CoordinatorOutput(self.twin), MicroOutput(self.micro),
                                   MacroOutput(self.macro)])
         self.twin.step_listeners.append(self.output.on_step)
