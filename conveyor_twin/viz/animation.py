@@ -266,6 +266,7 @@ def render(data: RecordingFrames, path: str, *, fps: float, dpi: int = 80,
                 writer.grab_frame()
                 if progress is not None:
                     progress(k + 1, total)
+        os.chmod(tmp, 0o644)  # mkstemp made it private; the output is an ordinary file
         os.replace(tmp, path)
     except (OSError, RuntimeError, ValueError) as exc:
         raise AnimationError(f'cannot write {path}: {exc}') from None
