@@ -13,7 +13,10 @@ VERBS = {
     'replay': ('conveyor_twin.ros.replay', 'republish a recording with its original timing'),
     'info': ('conveyor_twin.cli.info', 'summarize a recording (topics, counts, rates)'),
     'recover': ('conveyor_twin.cli.recover', 'rebuild a killed or damaged recording'),
-    'plot': ('conveyor_twin.cli.plot', 'plot trajectories, density, barriers, belts'),
+    'plot': ('conveyor_twin.cli.plot',
+             "draw a cell's layout (CELL.yaml) or a recording's figures (RUN.mcap)"),
+    'animate': ('conveyor_twin.cli.animate',
+                'render a recording as a GIF or MP4 (parts, density, barriers, belts)'),
     'resimulate': ('conveyor_twin.cli.resimulate',
                    're-run a recording and compare every message bit for bit'),
 }

@@ -1,4 +1,10 @@
-"""``conveyor-twin plot FILE -o DIR``: PNG figures of a recording (as Hoher et al. validate).
+"""``conveyor-twin plot``: a cell's layout, or PNG figures of a recording.
+
+``conveyor-twin plot CELL.yaml -o cell.png`` (a ``.yaml``/``.yml`` file, or ``default`` for the
+embedded cell) draws the cell to scale, every element named: belts with their direction,
+obstacles, actuators with their stroke, light barriers, sources, sinks, zones with their policy.
+
+``conveyor-twin plot RUN.mcap -o DIR`` writes the figures of a recording into DIR.
 
 Figures (each only when the recording has the topic):
 
@@ -11,7 +17,8 @@ Figures (each only when the recording has the topic):
 - ``belt_speeds.png``: commanded (dashed) and actual speed against time per belt;
 - ``actuators.png``: commanded and actual position against time per actuator.
 
-Times are simulation time [s]. Exit codes: 0 figures written, 1 the recording cannot be read.
+Times are simulation time [s]. Exit codes: 0 figures written, 1 the cell or recording cannot be
+read.
 """
 
 import argparse
@@ -162,11 +169,54 @@ def _floats(text: str) -> List[float]:
     return [float(v) for v in text.split(',') if v.strip()]
 
 
-def main(argv: List[str]) -> int:
-    """Write the figures of a recording; return 0, or 1 if it cannot be read."""
+CELL_SUFFIXES = ('.yaml', '.yml')
+#: Argument naming the embedded default cell.
+DEFAULT_CELL = 'default'
+
+
+def is_cell_argument(path: str) -> bool:
+    """Return True if ``path`` names a cell (YAML file or ``default``), not a recording."""
+    return path == DEFAULT_CELL or path.lower().endswith(CELL_SUFFIXES)
+
+
+def plot_cell_main(argv: List[str]) -> int:
+    """Draw a cell's layout into one PNG; return 0, or 1 if the cell is invalid."""
+    from conveyor_twin.cell import CellError, load_cell
+    from conveyor_twin.viz.cell_drawing import plot_cell
     p = argparse.ArgumentParser(prog='conveyor-twin plot', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument('file', help='MCAP recording')
+    p.add_argument('cell', help="cell YAML file ('default': the embedded default cell)")
+    p.add_argument('-o', '--output', required=True, help='PNG file to write')
+    p.add_argument('--width', type=float, default=14.0, help='figure width [in]')
+    p.add_argument('--dpi', type=int, default=110, help='resolution [dots per inch]')
+    args = p.parse_args(argv)
+    try:
+        cell = load_cell('' if args.cell == DEFAULT_CELL else args.cell)
+    except CellError as err:
+        print(f'conveyor-twin plot: invalid cell: {err}', file=sys.stderr)
+        return 1
+    if not args.output.lower().endswith('.png'):
+        print(f'conveyor-twin plot: -o {args.output}: a cell is drawn as a .png file',
+              file=sys.stderr)
+        return 2
+    parent = os.path.dirname(os.path.abspath(args.output))
+    if not os.path.isdir(parent):
+        print(f'conveyor-twin plot: -o {args.output}: directory {parent} does not exist',
+              file=sys.stderr)
+        return 2
+    print(plot_cell(cell, args.output, dpi=args.dpi, width=args.width))
+    return 0
+
+
+def main(argv: List[str]) -> int:
+    """Draw a cell (``.yaml``) or the figures of a recording; return 0, or 1 if unreadable."""
+    words = [a for a in argv if not a.startswith('-')]
+    if any(is_cell_argument(a) for a in words) and not any(
+            a.lower().endswith('.mcap') for a in words):
+        return plot_cell_main(argv)
+    p = argparse.ArgumentParser(prog='conveyor-twin plot', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument('file', help="MCAP recording (or a cell .yaml / 'default': its layout)")
     p.add_argument('-o', '--output', required=True, help='directory for the PNG files')
     p.add_argument('--times', type=_floats, default=list(DEFAULT_TIMES),
                    help='density snapshot times, comma separated [s] (default: 0,0.5,1,2,4,6)')

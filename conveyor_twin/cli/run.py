@@ -38,6 +38,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--namespace', default=None, help='ROS namespace of the nodes')
     p.add_argument('--markers-rate', type=float, default=30.0,
                    help='MarkerArray rate on `markers` [Hz]; 0 disables')
+    p.add_argument('--foxglove', default=None, metavar='[HOST:]PORT',
+                   help='serve a live Foxglove view (WebSocket) at HOST:PORT; host 127.0.0.1 '
+                   'by default, port 0 picks a free one (composed layout)')
+    p.add_argument('--foxglove-rate', type=float, default=50.0,
+                   help='rate of the every-step streams sent to Foxglove clients [Hz]')
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
     p.add_argument('--quiet', action='store_true', help='no progress line')
     from conveyor_twin.ros.run_recording import add_arguments
@@ -103,6 +108,22 @@ def run_composed(args: argparse.Namespace) -> int:
         twin.stop()
         context.try_shutdown()
         return 2
+    view = None
+    if args.foxglove is not None:
+        from conveyor_twin.ros.foxglove_bridge import attach
+        from conveyor_twin.viz.foxglove_view import FoxgloveError
+        try:
+            view = attach(twin, args.foxglove, stream_rate=args.foxglove_rate)
+        except FoxgloveError as exc:
+            print(f'conveyor-twin run: {exc}; the twin was not started', file=sys.stderr)
+            if recording is not None:
+                recording.close()
+            twin.stop()
+            context.try_shutdown()
+            return 2
+        host = args.foxglove.rpartition(':')[0].strip('[]') or '127.0.0.1'
+        print(f'conveyor_twin: Foxglove view at ws://{host}:{view.port} (Foxglove: Open '
+              'connection, Foxglove WebSocket)', file=sys.stderr, flush=True)
     interrupted = []
     signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
     signal.signal(signal.SIGTERM, lambda *_: interrupted.append(True))
@@ -124,6 +145,8 @@ def run_composed(args: argparse.Namespace) -> int:
                       file=sys.stderr, flush=True)
     finally:
         twin.stop()
+        if view is not None:
+            view.stop()
         summary = twin.coordinator.summary()
         if recording is not None:
             summary['recording'] = recording.close()
@@ -198,9 +221,9 @@ def main(argv: List[str]) -> int:
     """Entry point of ``conveyor-twin run``."""
     args = build_parser().parse_args(argv)
     ros_environment()
-    if args.split and (args.record or args.command):
-        print('conveyor-twin run: --record and --command need the composed layout (no --split)',
-              file=sys.stderr)
+    if args.split and (args.record or args.command or args.foxglove is not None):
+        print('conveyor-twin run: --record, --command and --foxglove need the composed layout '
+              '(no --split)', file=sys.stderr)
         return 2
     if args.split:
         return run_split(args)

@@ -20,4 +20,6 @@ def main(argv: List[str]) -> int:
         print(f'invalid cell: {exc}', file=sys.stderr)
         return 1
     print(summarize(cell))
+    target = args.cell or 'default'
+    print(f'Draw it: conveyor-twin plot {target} -o cell.png')
     return 0

@@ -1,0 +1,1 @@
+"""Pictures of cells and recordings (matplotlib) and the live Foxglove view."""

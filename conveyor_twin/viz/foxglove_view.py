@@ -1,0 +1,404 @@
+"""A Foxglove WebSocket server in the twin's process (``foxglove-sdk``), fed with the twin's bytes.
+
+The twin hands every message it publishes to :meth:`FoxgloveView.sink` as (absolute topic,
+simulation time [ns], CDR bytes). With no client subscribed that is one attribute test and a
+return. With a client, the sink keeps the latest message of the streams the scene needs and
+appends the forwarded ones to a bounded queue (oldest dropped and counted when full); a
+publisher thread hands them to the SDK, whose per-client backlog is bounded too, so a slow or
+vanished client never stalls the step.
+
+Channels: every contract stream under its ROS topic name, ``cdr`` encoding, ``ros2msg`` schema
+(per-step streams forwarded at ``stream_rate``, edges and diagnostics every one); ``scene``
+(``visualization_msgs/MarkerArray``: belts, walls, deflectors, pegs, actuators at their current
+position, light barriers red while blocked, parts with their shapes) and ``scene/density/ZONE``
+(``foxglove.Grid``: the macro density) built by a scene thread at ``scene_rate``, off the
+stepping thread. Clients may publish ``belt_command``/``actuator_command`` (``cdr`` or ``json``);
+they go to ``on_command``, which validates them like the ROS topics. Services (``step``,
+``reset``, ``spawn_parts``) take and answer CDR.
+
+No rclpy here: the ROS side (:mod:`conveyor_twin.ros.foxglove_bridge`) supplies the hooks.
+"""
+
+from collections import deque
+from dataclasses import dataclass
+import json
+import socket
+import threading
+import time
+from typing import Callable, Deque, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from conveyor_twin.cell.model import Cell
+from conveyor_twin.record import topics as contract
+from conveyor_twin.ros.markers import CellMarkers
+from conveyor_twin.wire import cdr, schemas
+
+DEFAULT_HOST = '127.0.0.1'
+DEFAULT_PORT = 8765
+#: Per-step streams are forwarded at this rate by default [Hz].
+DEFAULT_STREAM_RATE = 50.0
+#: Scene (markers, density grids) rate [Hz].
+DEFAULT_SCENE_RATE = 30.0
+#: Messages queued between the step and the publisher thread, and per client in the SDK [1].
+DEFAULT_BACKLOG = 1024
+#: Publisher thread period [s].
+PUBLISH_PERIOD = 0.01
+SCENE_TOPIC = 'scene'
+DENSITY_GRID_TOPIC = 'scene/density'
+#: Streams sent every message (events and slow streams); the others at ``stream_rate``.
+EVERY_MESSAGE = frozenset(('light_barrier_edges', 'diagnostics', 'markers'))
+COMMAND_TOPICS = {'belt_command': 'belt', 'actuator_command': 'actuator'}
+
+CommandHook = Callable[[str, str, float], Optional[str]]
+ServiceHandler = Callable[[bytes], bytes]
+
+
+class FoxgloveError(RuntimeError):
+    """The Foxglove server cannot be started (bad address, port in use, SDK missing)."""
+
+
+@dataclass(frozen=True)
+class ServiceSpec:
+    """A service offered to Foxglove: ROS type names of request and response, a CDR handler."""
+
+    name: str
+    type_name: str
+    request_text: str
+    response_text: str
+    handler: ServiceHandler
+
+
+def parse_address(text: str) -> Tuple[str, int]:
+    """Return (host, port) of ``[HOST:]PORT``; the host defaults to 127.0.0.1.
+
+    :raises FoxgloveError: for a port outside 0..65535 or not a number.
+    """
+    host, sep, port = text.rpartition(':')
+    if not sep:
+        host = DEFAULT_HOST
+    host = host.strip('[]') or DEFAULT_HOST
+    if not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise FoxgloveError(f'--foxglove {text!r}: expected [HOST:]PORT with a port in '
+                            '0..65535')
+    return host, int(port)
+
+
+def check_host(host: str) -> None:
+    """Raise :class:`FoxgloveError` unless ``host`` resolves to an address of this machine."""
+    try:
+        socket.getaddrinfo(host, None)
+    except (socket.gaierror, UnicodeError) as exc:
+        raise FoxgloveError(f'--foxglove: unknown host {host!r} ({exc})') from None
+
+
+class FoxgloveView:
+    """The Foxglove server of one twin.
+
+    :param cell: the running cell (the scene's geometry).
+    :param streams: absolute topic -> full type name of every stream the twin publishes.
+    :param namespace: ROS namespace of the twin (topic names are shown as published).
+    :param step_s: the twin's step [s].
+    :param on_command: called with (``belt``/``actuator``, name, value) for a command published
+        by a client; returns None if accepted, else the reason it was rejected.
+    :param services: services to offer.
+    :param stream_rate: rate of the per-step streams sent to clients [Hz].
+    :param scene_rate: rate of the scene [Hz].
+    :param backlog: queued messages at most, here and per client in the SDK [1].
+    """
+
+    def __init__(self, cell: Cell, *, streams: Dict[str, str], namespace: str = '',
+                 step_s: float, on_command: CommandHook,
+                 services: Tuple[ServiceSpec, ...] = (),
+                 stream_rate: float = DEFAULT_STREAM_RATE,
+                 scene_rate: float = DEFAULT_SCENE_RATE,
+                 backlog: int = DEFAULT_BACKLOG) -> None:
+        self.cell = cell
+        self.namespace = namespace
+        self.streams = dict(streams)
+        self.on_command = on_command
+        self.services = services
+        self.scene_period = 1.0 / scene_rate
+        self.backlog = backlog
+        every = max(1, int(round(1.0 / (stream_rate * step_s))))
+        self._every = {topic: 1 if contract.relative(topic, namespace) in EVERY_MESSAGE
+                       else every for topic in self.streams}
+        self._count = {topic: 0 for topic in self.streams}
+        self._queue: Deque[Tuple[str, int, bytes]] = deque()
+        self._latest: Dict[str, Tuple[int, bytes]] = {}
+        self._density: Dict[str, Tuple[int, bytes]] = {}
+        self._rel = {topic: contract.relative(topic, namespace) for topic in self.streams}
+        self.active = False          # a client is subscribed to something
+        self.dropped = 0             # messages dropped from the full queue
+        self.rejected = 0            # client messages refused (invalid command, bad payload)
+        self.last_rejection = ''
+        #: Called with the reason of a client message that is no command at all (undecodable,
+        #: another topic); rejected commands are reported by ``on_command`` itself.
+        self.on_invalid: Callable[[str], None] = lambda reason: None
+        self.sent = 0                # messages handed to the SDK
+        self.scenes = 0              # scenes built
+        self._subscriptions: Dict[Tuple[int, int], str] = {}
+        self._client_channels: Dict[Tuple[int, int], Tuple[str, str]] = {}
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._threads: List[threading.Thread] = []
+        self._markers = CellMarkers(cell)
+        self.server = None
+        self.port = 0
+        self.channels: Dict[str, object] = {}
+
+    # -- the step side ---------------------------------------------------------------------
+    def sink(self, topic: str, stamp_ns: int, data: bytes) -> None:
+        """Take one message the twin published (stepping thread: cheap, never blocks).
+
+        :param topic: absolute topic name.
+        :param stamp_ns: simulation time of the message [ns].
+        :param data: its CDR bytes (kept, not copied: the twin builds new bytes every step).
+        """
+        if not self.active:
+            return
+        rel = self._rel.get(topic)
+        if rel is None:
+            return
+        if rel == 'density':
+            self._density[_density_zone(data)] = (stamp_ns, data)
+        elif rel in ('parts', 'light_barriers', 'actuator_states'):
+            self._latest[rel] = (stamp_ns, data)
+        n = self._count[topic]
+        self._count[topic] = n + 1
+        if n % self._every[topic]:
+            return
+        if len(self._queue) >= self.backlog:
+            self._queue.popleft()
+            self.dropped += 1
+        self._queue.append((topic, stamp_ns, data))
+
+    # -- server --------------------------------------------------------------------------
+    def start(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> int:
+        """Start the server and its threads; return the port it listens on.
+
+        :raises FoxgloveError: if the host is unknown, the port is taken or the SDK is missing.
+        """
+        check_host(host)
+        try:
+            import foxglove
+            from foxglove.websocket import Capability
+        except ImportError as exc:
+            raise FoxgloveError(f'--foxglove needs the foxglove-sdk package ({exc}); '
+                                'pip install foxglove-sdk') from None
+        context = self._context = foxglove.Context()  # the channels live as long as it
+        for topic, type_name in self.streams.items():
+            self.channels[topic] = self._channel(foxglove, context, topic, type_name)
+        scene = contract.resolve(SCENE_TOPIC, self.namespace)
+        self.channels[scene] = self._channel(foxglove, context, scene,
+                                             'visualization_msgs/msg/MarkerArray')
+        from foxglove.channels import GridChannel
+        self._grid_channels = {
+            zone.name: GridChannel(contract.resolve(f'{DENSITY_GRID_TOPIC}/{zone.name}',
+                                                    self.namespace), context=context)
+            for zone in self.cell.zones}
+        try:
+            self.server = foxglove.start_server(
+                name=f'conveyor_twin: {self.cell.settings.name}', host=host, port=port,
+                capabilities=[Capability.ClientPublish, Capability.Services, Capability.Time],
+                server_listener=_Listener(self), supported_encodings=['cdr', 'json'],
+                services=[self._service(foxglove, s) for s in self.services],
+                context=context, message_backlog_size=self.backlog)
+        except Exception as exc:  # the SDK raises its own error types for bind failures
+            raise FoxgloveError(f'--foxglove {host}:{port}: cannot listen there ({exc})') \
+                from None
+        self.port = self.server.port
+        for target, name in ((self._publish_loop, 'foxglove_publish'),
+                             (self._scene_loop, 'foxglove_scene')):
+            thread = threading.Thread(target=target, name=name, daemon=True)
+            thread.start()
+            self._threads.append(thread)
+        return self.port
+
+    @staticmethod
+    def _channel(foxglove, context, topic: str, type_name: str):
+        schema = foxglove.Schema(name=type_name, encoding='ros2msg',
+                                 data=schemas.full_text(type_name).encode())
+        return foxglove.Channel(topic, schema=schema, message_encoding='cdr', context=context)
+
+    def _service(self, foxglove, spec: ServiceSpec):
+        from foxglove import MessageSchema, Service, ServiceSchema
+
+        def message_schema(suffix: str, text: str) -> MessageSchema:
+            return MessageSchema(encoding='cdr', schema=foxglove.Schema(
+                name=f'{spec.type_name}_{suffix}', encoding='ros2msg', data=text.encode()))
+
+        def handler(request) -> bytes:
+            return spec.handler(bytes(request.payload))
+
+        return Service(contract.resolve(spec.name, self.namespace), schema=ServiceSchema(
+            spec.type_name, request=message_schema('Request', spec.request_text),
+            response=message_schema('Response', spec.response_text)), handler=handler)
+
+    def stop(self) -> None:
+        """Stop the threads and the server (clients are disconnected)."""
+        self._stop.set()
+        for thread in self._threads:
+            thread.join(2.0)
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+
+    # -- threads -------------------------------------------------------------------------
+    def _publish_loop(self) -> None:
+        queue = self._queue
+        while not self._stop.wait(PUBLISH_PERIOD):
+            while queue:
+                topic, stamp_ns, data = queue.popleft()
+                self.channels[topic].log(data, log_time=stamp_ns)
+                self.sent += 1
+
+    def _scene_loop(self) -> None:
+        next_time = time.monotonic()
+        while not self._stop.is_set():
+            next_time += self.scene_period
+            delay = next_time - time.monotonic()
+            if delay < 0.0:
+                next_time = time.monotonic()
+            elif self._stop.wait(delay):
+                break
+            if self.active:
+                self.build_scene()
+
+    def build_scene(self) -> None:
+        """Log the scene and density grids of the latest state (scene thread)."""
+        parts = self._latest.get('parts')
+        if parts is None:
+            return
+        stamp_ns, data = parts
+        p = cdr.decode_part_states(data)
+        blocked = np.zeros(len(self.cell.light_barriers), bool)
+        barriers = self._latest.get('light_barriers')
+        if barriers is not None:
+            blocked = cdr.decode_light_barrier_states(barriers[1])[4]
+        position = np.array([a.initial_position for a in self.cell.actuators])
+        actuators = self._latest.get('actuator_states')
+        if actuators is not None:
+            from conveyor_twin.record.decode import decode_actuator_states
+            position = decode_actuator_states(actuators[1]).actual
+        scene = self._markers.build(stamp_ns, p.part_type, p.x, p.y, blocked, position)
+        self.channels[contract.resolve(SCENE_TOPIC, self.namespace)].log(scene,
+                                                                        log_time=stamp_ns)
+        for zone, (t_ns, grid_bytes) in list(self._density.items()):
+            channel = self._grid_channels.get(zone)
+            if channel is not None:
+                channel.log(density_grid(cdr.decode_density_grid(grid_bytes)), log_time=t_ns)
+        self.server.broadcast_time(stamp_ns)
+        self.scenes += 1
+
+    # -- client input ----------------------------------------------------------------------
+    def _subscribed(self, key: Tuple[int, int], topic: str, on: bool) -> None:
+        with self._lock:
+            if on:
+                self._subscriptions[key] = topic
+            else:
+                self._subscriptions.pop(key, None)
+            active = bool(self._subscriptions)
+            if active and not self.active:
+                self._queue.clear()
+            self.active = active
+
+    def _advertised(self, key: Tuple[int, int], topic: str, encoding: str) -> None:
+        self._client_channels[key] = (contract.relative(topic, self.namespace), encoding)
+
+    def _unadvertised(self, key: Tuple[int, int]) -> None:
+        self._client_channels.pop(key, None)
+
+    def client_message(self, key: Tuple[int, int], data: bytes) -> Optional[str]:
+        """Take a message a client published; return None if applied, else the reason.
+
+        :param key: (client id, client channel id).
+        """
+        topic, encoding = self._client_channels.get(key, ('', ''))
+        kind = COMMAND_TOPICS.get(topic.lstrip('/'))
+        if kind is None:
+            return self._invalid(f'{topic or "an unadvertised channel"}: clients may publish '
+                                 'only belt_command and actuator_command')
+        try:
+            name, value = _decode_command(kind, encoding, data)
+        except (ValueError, KeyError, TypeError) as exc:
+            return self._invalid(f'{topic}: cannot decode the {encoding} message ({exc})')
+        reason = self.on_command(kind, name, value)
+        if reason is not None:
+            return self._reject(reason)
+        return None
+
+    def _invalid(self, reason: str) -> str:
+        self.on_invalid(reason)
+        return self._reject(reason)
+
+    def _reject(self, reason: str) -> str:
+        """Count a refused client message and tell the clients why (a status message)."""
+        self.rejected += 1
+        self.last_rejection = reason
+        if self.server is not None:
+            from foxglove import StatusLevel
+            self.server.publish_status(f'rejected: {reason}', StatusLevel.Warning)
+        return reason
+
+    def counters(self) -> Dict[str, float]:
+        """Return the view's counters: clients' subscriptions, sent, dropped, rejected."""
+        return {'subscriptions': len(self._subscriptions), 'sent': self.sent,
+                'dropped': self.dropped, 'rejected': self.rejected, 'scenes': self.scenes}
+
+
+def _decode_command(kind: str, encoding: str, data: bytes) -> Tuple[str, float]:
+    field = 'belt' if kind == 'belt' else 'actuator'
+    value_field = 'speed' if kind == 'belt' else 'position'
+    if encoding == 'json':
+        msg = json.loads(bytes(data).decode('utf-8'))
+        return str(msg[field]), float(msg[value_field])
+    if encoding != 'cdr':
+        raise ValueError(f'encoding {encoding!r} is not cdr or json')
+    if kind == 'belt':
+        return cdr.decode_belt_command(bytes(data))
+    return cdr.decode_actuator_command(bytes(data))
+
+
+def density_grid(grid: cdr.DensityGridData):
+    """Return a ``foxglove.schemas.Grid`` of a DensityGrid (one float32 field ``density``)."""
+    from foxglove.schemas import (Grid, NumericType, PackedElementField, Pose, Quaternion,
+                                  Timestamp, Vector2, Vector3)
+    ny, nx = grid.density.shape
+    return Grid(
+        timestamp=Timestamp(sec=grid.stamp_ns // 1_000_000_000,
+                            nsec=grid.stamp_ns % 1_000_000_000),
+        frame_id=grid.frame_id,
+        pose=Pose(position=Vector3(x=grid.origin_x, y=grid.origin_y, z=0.001),
+                  orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+        column_count=nx, cell_size=Vector2(x=grid.resolution, y=grid.resolution),
+        row_stride=4 * nx, cell_stride=4,
+        fields=[PackedElementField(name='density', offset=0, type=NumericType.Float32)],
+        data=np.ascontiguousarray(grid.density, '<f4').tobytes())
+
+
+def _density_zone(data: bytes) -> str:
+    from conveyor_twin.record.series import _density_zone as zone_of
+    return zone_of(data)
+
+
+class _Listener:
+    """The SDK's server listener: subscriptions and client channels to the view."""
+
+    def __init__(self, view: FoxgloveView) -> None:
+        self.view = view
+
+    def on_subscribe(self, client, channel) -> None:
+        self.view._subscribed((client.id, channel.id), channel.topic, True)
+
+    def on_unsubscribe(self, client, channel) -> None:
+        self.view._subscribed((client.id, channel.id), channel.topic, False)
+
+    def on_client_advertise(self, client, channel) -> None:
+        self.view._advertised((client.id, channel.id), channel.topic, channel.encoding)
+
+    def on_client_unadvertise(self, client, client_channel_id: int) -> None:
+        self.view._unadvertised((client.id, client_channel_id))
+
+    def on_message_data(self, client, client_channel_id: int, data: bytes) -> None:
+        self.view.client_message((client.id, client_channel_id), data)
