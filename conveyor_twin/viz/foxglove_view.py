@@ -31,7 +31,7 @@ import numpy as np
 
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.record import topics as contract
-from conveyor_twin.ros.markers import CellMarkers
+from conveyor_twin.output.markers import CellMarkers
 from conveyor_twin.wire import cdr, schemas
 
 DEFAULT_HOST = '127.0.0.1'
