@@ -9,40 +9,19 @@ import os
 import threading
 from typing import Dict, Optional
 
-import rclpy
 from rclpy.context import Context
-from rclpy.executors import ExternalShutdownException
 
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.runner import raise_thread_priority, realtime_priority, Runner
 from conveyor_twin.coord.stages import MacroStage, MicroStage
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.coord.twin import Twin
+from conveyor_twin.ros.compat import make_executor, spin_until
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
 from conveyor_twin.ros.macro_node import MacroNode
 from conveyor_twin.ros.micro_node import MicroNode
 from conveyor_twin.ros.params import parameter_overrides
 from conveyor_twin.ros.qos import publish_failures
-
-
-def make_executor(context: Context):
-    """Return rclpy's EventsExecutor (about 3x less CPU) or, if absent, a single-threaded one."""
-    try:
-        from rclpy.experimental import EventsExecutor
-        return EventsExecutor(context=context)
-    except ImportError:  # pragma: no cover - older rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor(context=context)
-
-
-def spin_until(executor, stop: threading.Event, period: float = 0.05) -> None:
-    """Serve callbacks until ``stop`` is set (rclpy 9.1's EventsExecutor.spin() cannot be
-    ended by ``shutdown()`` from another thread; bounded spin_once calls can)."""
-    try:
-        while not stop.is_set() and executor.context.ok():
-            executor.spin_once(timeout_sec=period)
-    except (ExternalShutdownException, rclpy.executors.ShutdownException):
-        pass
 
 
 class ComposedTwin:

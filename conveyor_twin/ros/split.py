@@ -22,7 +22,7 @@ from conveyor_twin.cell import CellError, load_cell
 from conveyor_twin.coord.runner import Runner
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.coord.twin import Twin
-from conveyor_twin.ros.compose import make_executor, spin_until
+from conveyor_twin.ros.compat import make_executor, spin_until
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
 from conveyor_twin.ros.scale_node import decode_counters, MACRO_ROLE, MICRO_ROLE
 from conveyor_twin.ros.standalone import start_process

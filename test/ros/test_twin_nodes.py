@@ -58,6 +58,7 @@ def _steps(h: Harness, topic: str, decode) -> list:
     return [decode(data) for data in h.probe.received[topic]]
 
 
+@pytest.mark.smoke
 def test_lockstep_step_advances_exactly_n_and_every_stream_has_consecutive_steps(harness):
     response = harness.step(25)
     assert response.step == 25
