@@ -1,31 +1,17 @@
 """What differs between the supported ROS 2 distros' rclpy, in one place.
 
-Jazzy Jalisco ships rclpy 7.x, Kilted Kaiju rclpy 9.x. The nodes call the functions here instead
-of branching on the distro themselves; everything else of rclpy they use is the same in both.
+Jazzy Jalisco ships rclpy 7.1, Kilted Kaiju rclpy 9.1. The nodes make their executors and futures
+and serve callbacks through the functions here, which use only what both have; everything else of
+rclpy the package uses is the same in both. A future difference is branched on here, nowhere else.
 """
 
 import threading
-from importlib import metadata
-from typing import Any, Tuple
+from typing import Any
 
 from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, ShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.task import Future
-
-
-def _rclpy_version() -> Tuple[int, ...]:
-    """Return rclpy's version; wheels and system installs both register it as ``rclpy``."""
-    try:
-        text = metadata.version('rclpy')
-    except metadata.PackageNotFoundError:  # pragma: no cover - rclpy without metadata
-        return (0,)
-    return tuple(int(part) for part in text.split('.')[:3] if part.isdigit())
-
-
-RCLPY_VERSION = _rclpy_version()
-#: rclpy 9 (Kilted) and later; rclpy 7 is Jazzy.
-KILTED_OR_LATER = RCLPY_VERSION >= (9,)
 
 
 def make_executor(context: Context) -> Any:
