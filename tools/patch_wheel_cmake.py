@@ -75,8 +75,9 @@ def main() -> int:
     """Patch the running interpreter's environment and report how many files changed."""
     python_header = Path(sysconfig.get_paths()['include']) / 'Python.h'
     if not python_header.is_file():
+        version = f'{sys.version_info[0]}.{sys.version_info[1]}'
         print(f'setup: error: {python_header} is missing: install the Python development '
-              f'headers (e.g. python{sys.version_info[0]}.{sys.version_info[1]}-dev)', file=sys.stderr)
+              f'headers (e.g. python{version}-dev)', file=sys.stderr)
         return 1
     prefix = Path(sys.prefix)
     changed = patch(prefix)

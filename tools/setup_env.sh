@@ -80,9 +80,13 @@ done
 
 if [[ -z "${PYTHON:-}" ]]; then
     PYTHON=python3
-    for py in python3.11 python3.12; do command -v "$py" > /dev/null && { PYTHON=$py; break; }; done
+    # pyenv's shims exist for every installed version, but run only the active ones: try each.
+    for py in python3.11 python3.12; do
+        "$py" -c '' < /dev/null > /dev/null 2>&1 && { PYTHON=$py; break; }
+    done
 fi
-command -v "$PYTHON" > /dev/null || die "$PYTHON not found: install Python 3.11 or 3.12 or set PYTHON"
+"$PYTHON" -c '' < /dev/null > /dev/null 2>&1 \
+    || die "$PYTHON does not run: install Python 3.11 or 3.12, or set PYTHON to one that runs"
 py_version=$("$PYTHON" -c 'import sys; print("%d.%d" % sys.version_info[:2])')
 [[ "$py_version" == 3.11 || "$py_version" == 3.12 ]] \
     || die "$PYTHON is Python $py_version, the ROS 2 wheels are built for 3.11 and 3.12:"`
