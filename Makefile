@@ -1,12 +1,21 @@
-# conveyor_twin: set up, run, test. Everything lives in .venv and build/; no ROS install needed.
-#   make setup                 build .venv (idempotent; seconds when nothing changed)
+# conveyor_twin: set up, run, test. Everything lives in .venv-<distro> and build/; no ROS install
+# needed (ROS 2 comes from the PyPI wheels pinned in requirements/<distro>.txt).
+#   make setup                 build .venv-jazzy (idempotent; seconds when nothing changed)
+#   ROS_DISTRO=kilted make setup   the same for ROS 2 Kilted, in .venv-kilted
+#   make setup PYTHON=python3.12   create the environment with Python 3.12 (default: 3.11)
 #   make run ARGS='--mode fast'   setup, then conveyor-twin run $(ARGS)
 #   make test [PYTEST_ARGS=...]   setup, then the whole pytest suite
-#   make clean                 remove .venv, build/ and caches (the next setup starts from scratch)
+#   make clean                 remove every .venv*, build/ and caches (the next setup starts anew)
+# .venv is a symlink to the environment the last setup built (see docs/platforms.md).
 
-VENV := .venv
+ROS_DISTRO ?= jazzy
+VENV := .venv-$(ROS_DISTRO)
 ARGS ?=
 PYTEST_ARGS ?=
+export ROS_DISTRO
+ifdef PYTHON
+export PYTHON
+endif
 
 .PHONY: setup run test clean
 
@@ -24,5 +33,5 @@ test: setup
 	exit $$code
 
 clean:
-	rm -rf $(VENV) build install log .pytest_cache *.egg-info
+	rm -rf .venv .venv-* build install log .pytest_cache *.egg-info
 	find . -name __pycache__ -type d -prune -not -path './.git/*' -exec rm -rf {} +

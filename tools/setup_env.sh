@@ -1,29 +1,43 @@
 #!/usr/bin/env bash
-# Build the development environment of conveyor_twin in .venv, from nothing, without any ROS
-# installed or sourced (ROS 2 Kilted comes from the PyPI wheels pinned in requirements.txt).
+# Build the development environment of conveyor_twin for one ROS 2 distro, from nothing, without
+# any ROS installed or sourced (ROS 2 comes from the PyPI wheels pinned in
+# requirements/<distro>.txt).
 #
-# Steps, each skipped when a stamp in .venv/.setup/ says its inputs did not change:
-#   1. check the tools (Python 3.11 with headers, cmake, make, C and C++ compilers);
-#   2. create .venv and pip-install requirements.txt;
+# Each distro has its own environment, .venv-<distro>; .venv is a symlink to the one the last
+# setup built (so .venv/bin/conveyor-twin and .venv/bin/python always name a complete one). The
+# environment records the distro and the Python it was made for (.venv-<distro>/.setup/env); one
+# made for another distro or Python (or an old .venv directory) is removed and rebuilt whole, never
+# partly reused.
+#
+# Steps, each skipped when a stamp in .venv-<distro>/.setup/ says its inputs did not change:
+#   1. check the tools (Python 3.11 or 3.12 with headers, cmake, make, C and C++ compilers);
+#   2. create .venv-<distro> and pip-install requirements/<distro>.txt;
 #   3. patch the wheels' exported CMake files (build-machine include paths;
 #      tools/patch_wheel_cmake.py);
-#   4. build msg_defs/ (conveyor_twin_msgs) with cmake + make in build/msg_defs and install it into
-#      the .venv prefix itself: Python package in .venv/lib/python3.11/site-packages, typesupport
-#      libraries in .venv/lib (on the LD_LIBRARY_PATH that ros-wheels-bootstrapper sets when the
-#      venv's python starts), share/ and the ament index in .venv/share;
-#   5. add .venv to AMENT_PREFIX_PATH of every start of the venv's python (a .pth file; the wheels
-#      only set LD_LIBRARY_PATH), so ament_index lookups find conveyor_twin_msgs and conveyor_twin;
-#   6. pip install -e . (the conveyor_twin package, console scripts in .venv/bin), plus setup.py's
-#      data_files (ament index marker, package.xml, cells) into .venv/share.
+#   4. build msg_defs/ (conveyor_twin_msgs) with cmake + make in build/msg_defs-<distro> and
+#      install it into the environment's prefix itself: Python package in site-packages,
+#      typesupport libraries in lib/ (on the LD_LIBRARY_PATH that ros-wheels-bootstrapper sets
+#      when the venv's python starts), share/ and the ament index in share/;
+#   5. add the prefix to AMENT_PREFIX_PATH of every start of the venv's python (a .pth file; the
+#      wheels only set LD_LIBRARY_PATH), so ament_index lookups find conveyor_twin_msgs and
+#      conveyor_twin;
+#   6. pip install -e . (the conveyor_twin package, console scripts in bin/), plus setup.py's
+#      data_files (ament index marker, package.xml, cells) into share/;
+#   7. point .venv at this environment.
 #
-# Environment: PYTHON (interpreter to create .venv with; default python3.11, else python3),
-# CC / CXX (compilers), JOBS (parallel make jobs). Works with CI=true and no stdin.
+# Environment: ROS_DISTRO (jazzy, the default, or kilted), PYTHON (interpreter to create the
+# environment with; default python3.11, else python3.12, else python3), CC / CXX (compilers), JOBS
+# (parallel make jobs). Works with CI=true and no stdin.
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-VENV="$ROOT/.venv"
+DISTROS='jazzy kilted'
+DISTRO=${ROS_DISTRO:-jazzy}
+VENV="$ROOT/.venv-$DISTRO"
+LINK="$ROOT/.venv"
 STAMPS="$VENV/.setup"
-MSG_BUILD="$ROOT/build/msg_defs"
+MSG_BUILD="$ROOT/build/msg_defs-$DISTRO"
+REQUIREMENTS="requirements/$DISTRO.txt"
 export PIP_NO_INPUT=1 PIP_DISABLE_PIP_VERSION_CHECK=1
 START=$SECONDS
 
@@ -48,6 +62,10 @@ quiet_pip() {
             || true; }
 }
 
+[[ " $DISTROS " == *" $DISTRO "* ]] || die "ROS_DISTRO=$DISTRO is not supported:"`
+    `" use ROS_DISTRO=jazzy (the default) or ROS_DISTRO=kilted (see docs/platforms.md)"
+[[ -f "$ROOT/$REQUIREMENTS" ]] || die "$REQUIREMENTS is missing"
+
 # 1. Tools -------------------------------------------------------------------------------------
 command -v cmake > /dev/null || die 'cmake is missing (needed to build msg_defs/): install cmake'
 command -v make > /dev/null || die 'make is missing (needed to build msg_defs/): install make'
@@ -61,33 +79,52 @@ done
 [[ -n "$cxx_found" ]] || die 'no C++ compiler (c++, g++ or clang++; or set CXX): install g++'
 
 if [[ -z "${PYTHON:-}" ]]; then
-    if command -v python3.11 > /dev/null; then PYTHON=python3.11; else PYTHON=python3; fi
+    PYTHON=python3
+    # pyenv's shims exist for every installed version, but run only the active ones: try each.
+    for py in python3.11 python3.12; do
+        "$py" -c '' < /dev/null > /dev/null 2>&1 && { PYTHON=$py; break; }
+    done
 fi
-command -v "$PYTHON" > /dev/null || die "$PYTHON not found: install Python 3.11 or set PYTHON"
-"$PYTHON" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' \
-    || die "$PYTHON is Python $("$PYTHON" -c 'import sys; print(sys.version.split()[0])'),"`
-          `" the ROS 2 wheels need 3.11: set PYTHON=/path/to/python3.11"
+"$PYTHON" -c '' < /dev/null > /dev/null 2>&1 \
+    || die "$PYTHON does not run: install Python 3.11 or 3.12, or set PYTHON to one that runs"
+py_version=$("$PYTHON" -c 'import sys; print("%d.%d" % sys.version_info[:2])')
+[[ "$py_version" == 3.11 || "$py_version" == 3.12 ]] \
+    || die "$PYTHON is Python $py_version, the ROS 2 wheels are built for 3.11 and 3.12:"`
+          `" set PYTHON=/path/to/python3.12 (or python3.11)"
 python_h=$("$PYTHON" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')/Python.h
 [[ -f "$python_h" ]] || die "$python_h is missing: msg_defs/ compiles a Python extension;"`
-    `" install the Python 3.11 development headers (Debian/Ubuntu: python3.11-dev)"
+    `" install the Python $py_version development headers (Debian/Ubuntu: python$py_version-dev)"
 
 # 2. Virtual environment and requirements --------------------------------------------------------
-if [[ -d "$VENV" ]] && ! "$VENV/bin/python" -c '' < /dev/null 2> /dev/null; then
-    say "$VENV is broken (its interpreter does not start), recreating it"
-    rm -rf "$VENV"
+# What the environment is made for: a different distro or Python means a new environment.
+env_id="distro=$DISTRO python=$py_version"
+if [[ -d "$LINK" && ! -L "$LINK" ]]; then
+    say "$LINK is an environment of an older layout (one for all distros): removing it"
+    rm -rf "$LINK"
+fi
+if [[ -d "$VENV" ]]; then
+    if ! "$VENV/bin/python" -c '' < /dev/null 2> /dev/null; then
+        say "$VENV is broken (its interpreter does not start), recreating it"
+        rm -rf "$VENV"
+    elif ! stamp_ok env "$env_id"; then
+        say "$VENV holds $(cat "$STAMPS/env" 2> /dev/null || echo 'an unknown environment'),"`
+            `" not $env_id: recreating it"
+        rm -rf "$VENV"
+    fi
 fi
 if [[ ! -d "$VENV" ]]; then
-    say "creating $VENV with $("$PYTHON" -c 'import sys; print(sys.executable)')"
+    say "creating $VENV ($env_id) with $("$PYTHON" -c 'import sys; print(sys.executable)')"
     "$PYTHON" -m venv "$VENV" \
-        || die "$PYTHON -m venv failed (Debian/Ubuntu: install python3.11-venv)"
+        || die "$PYTHON -m venv failed (Debian/Ubuntu: install python$py_version-venv)"
+    stamp_write env "$env_id"
 fi
 
-req_hash=$(hash_files requirements.txt)
+req_hash=$(hash_files requirements/common.txt "$REQUIREMENTS")
 if stamp_ok requirements "$req_hash"; then
     say 'requirements up to date'
 else
-    say 'installing requirements.txt into .venv (about a minute on a cold pip cache)'
-    quiet_pip install -q --progress-bar off -r "$ROOT/requirements.txt"
+    say "installing $REQUIREMENTS into $VENV (a few minutes on a cold pip cache)"
+    quiet_pip install -q --progress-bar off -r "$ROOT/$REQUIREMENTS"
     # The wheels' CMake files are rewritten by every install: patch them again.
     "$VENV/bin/python" "$ROOT/tools/patch_wheel_cmake.py" < /dev/null
     stamp_write requirements "$req_hash"
@@ -104,7 +141,7 @@ if stamp_ok msg_defs "$msg_hash" && [[ -d "$SITE/conveyor_twin_msgs" ]] \
         && [[ -f "$VENV/share/ament_index/resource_index/packages/conveyor_twin_msgs" ]]; then
     say 'conveyor_twin_msgs up to date'
 else
-    say 'building msg_defs/ (conveyor_twin_msgs) into .venv'
+    say "building msg_defs/ (conveyor_twin_msgs) against ROS 2 $DISTRO into $VENV"
     "$VENV/bin/python" "$ROOT/tools/patch_wheel_cmake.py" < /dev/null
     rm -rf "$MSG_BUILD"
     mkdir -p "$MSG_BUILD"
@@ -131,7 +168,7 @@ else
     [[ -d "$SITE/conveyor_twin_msgs" ]] \
         || die "msg_defs/ installed, but not into $SITE/conveyor_twin_msgs; see $log"
     stamp_write msg_defs "$msg_hash"
-    say "conveyor_twin_msgs installed into .venv ($(elapsed))"
+    say "conveyor_twin_msgs installed into $VENV ($(elapsed))"
 fi
 
 # 5. AMENT_PREFIX_PATH --------------------------------------------------------------------------
@@ -167,4 +204,11 @@ else
     say "conveyor_twin installed ($(elapsed))"
 fi
 
-say "ready in $(elapsed): .venv/bin/conveyor-twin, .venv/bin/python -m pytest"
+# 7. .venv -> this environment --------------------------------------------------------------------
+if [[ "$(readlink "$LINK" 2> /dev/null)" != ".venv-$DISTRO" ]]; then
+    ln -sfn ".venv-$DISTRO" "$LINK"
+    say ".venv now points at .venv-$DISTRO"
+fi
+
+say "ready in $(elapsed): ROS 2 $DISTRO, Python $py_version in .venv-$DISTRO (.venv):"`
+    `" .venv/bin/conveyor-twin, .venv/bin/python -m pytest"

@@ -18,7 +18,7 @@ from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.producers import CoordinatorOutput, MacroOutput, MicroOutput
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
-from conveyor_twin.ros.executors import make_executor, spin_until
+from conveyor_twin.ros.compat import make_executor, spin_until
 from conveyor_twin.ros.macro_node import MacroNode
 from conveyor_twin.ros.micro_node import MicroNode
 from conveyor_twin.ros.params import parameter_overrides

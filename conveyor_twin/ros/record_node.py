@@ -33,6 +33,7 @@ from conveyor_twin.record import topics as contract
 from conveyor_twin.record.errors import RecordingError
 from conveyor_twin.record.writer import McapRecorder
 from conveyor_twin.ros import endpoints
+from conveyor_twin.ros.compat import make_executor, make_future
 from conveyor_twin.ros.qos import to_rclpy
 
 #: Smallest history depth of the recorder's subscriptions [messages].
@@ -189,16 +190,6 @@ class RecordNode(Node):
         return {topic: sub.get_publisher_count() for topic, sub in self._subs.items()}
 
 
-def make_executor(context: Any) -> Any:
-    """Return rclpy's EventsExecutor (about a third of the CPU) or a single-threaded one."""
-    try:
-        from rclpy.experimental import EventsExecutor
-        return EventsExecutor(context=context)
-    except ImportError:  # pragma: no cover - older rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor(context=context)
-
-
 def _known_types() -> frozenset:
     from conveyor_twin.wire.schemas import SCHEMAS
     return frozenset(SCHEMAS)
@@ -320,10 +311,7 @@ def main(argv: Optional[List[str]] = None) -> int:
                       discover=args.discover)
     executor.add_node(node)
     start = time.monotonic()
-    done = executor.create_future() if hasattr(executor, 'create_future') else None
-    if done is None:
-        from rclpy.task import Future
-        done = Future()
+    done = make_future(executor)
 
     def tick() -> None:
         node.tick()

@@ -20,7 +20,7 @@ from conveyor_twin.coord.codec import decode_counters, MACRO_ROLE, MICRO_ROLE
 from conveyor_twin.coord.runner import Runner
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
-from conveyor_twin.ros.executors import make_executor, spin_until
+from conveyor_twin.ros.compat import make_executor, spin_until
 from conveyor_twin.ros.standalone import start_process
 
 SCALE_CONNECT_TIMEOUT = 30.0  # s for the scale processes to appear and match

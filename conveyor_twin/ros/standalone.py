@@ -13,7 +13,7 @@ from conveyor_twin.cell import CellError, load_cell
 from conveyor_twin.coord.assembly import AssembledTwin, build_twin, Layout
 from conveyor_twin.coord.runner import freeze_heap
 from conveyor_twin.coord.warmup import warm_up
-from conveyor_twin.ros.executors import make_executor, spin_until
+from conveyor_twin.ros.compat import make_executor, spin_until
 from conveyor_twin.ros.params import declare_twin_parameters
 
 

@@ -39,6 +39,7 @@ def test_bags_exist_are_small_and_documented():
         assert bag in readme and bag in script, bag
 
 
+@pytest.mark.smoke
 @pytest.mark.parametrize('bag', BAGS)
 def test_info(bag):
     summary = reader.info(str(BAGS_DIR / bag))
@@ -160,6 +161,7 @@ def test_independent_readers_decode_every_message_alike(bag, decoded):
         assert 45 <= len(markers) <= 60 and all(m['markers'] for m in markers)
 
 
+@pytest.mark.smoke
 @pytest.mark.ros
 def test_markers_and_diagnostics_decode_with_ros_typesupport(decoded):
     """rclpy's own CDR decoder (the C typesupport) agrees with mcap_ros2 on every message."""
@@ -188,6 +190,7 @@ def test_markers_and_diagnostics_decode_with_ros_typesupport(decoded):
     assert seen == counts['/markers']['count'] + counts['/diagnostics']['count'] > 45
 
 
+@pytest.mark.smoke
 @pytest.mark.ros
 @pytest.mark.parametrize('bag', BAGS)
 def test_resimulate_bag_is_bit_identical(bag, ros_context):

@@ -50,6 +50,7 @@ def check_decoded(topic, msg, log_time, expected):
         raise AssertionError(topic)
 
 
+@pytest.mark.smoke
 @pytest.mark.parametrize('compression', COMPRESSIONS)
 def test_roundtrip_mcap_reader(tmp_path, compression):
     path = tmp_path / 'run.mcap'
@@ -100,6 +101,7 @@ def test_roundtrip_mcap_reader(tmp_path, compression):
     assert recorder['topics']['/parts']['recorded'] == len(sent['/parts'])
 
 
+@pytest.mark.smoke
 @pytest.mark.parametrize('compression', COMPRESSIONS)
 def test_roundtrip_rosbags(tmp_path, compression):
     rosbag2 = pytest.importorskip('rosbags.rosbag2')

@@ -24,6 +24,7 @@ def run(ros_processes, *args):
     return process.returncode, out, err
 
 
+@pytest.mark.smoke
 def test_every_published_stream_and_the_commands_are_recorded(tmp_path, ros_processes,
                                                                ros_context):
     path = tmp_path / 'run.mcap'

@@ -170,6 +170,7 @@ def assert_fully_populated(msg: Any) -> None:
 
 # (a) -------------------------------------------------------------------------------------------
 
+@pytest.mark.smoke
 @pytest.mark.parametrize('name', sorted(CONTRACT_MSGS))
 def test_message_fields_match_contract(name: str) -> None:
     msg_class = getattr(MSGS, name)
@@ -197,6 +198,7 @@ def test_contract_covers_every_generated_type() -> None:
 
 # (b) -------------------------------------------------------------------------------------------
 
+@pytest.mark.smoke
 @pytest.mark.parametrize('name', sorted(CONTRACT_MSGS))
 def test_message_round_trip_in_process(name: str, ros_executor: Any) -> None:
     from rclpy.node import Node
@@ -232,6 +234,7 @@ def _read_lines(stream: Any, lines: 'queue.Queue[str]') -> None:
         lines.put(line.strip())
 
 
+@pytest.mark.smoke
 @pytest.mark.slow
 def test_part_states_reach_another_process(ros_executor: Any, ros_processes: Any,
                                            tmp_path: Path) -> None:
@@ -281,6 +284,7 @@ def test_part_states_reach_another_process(ros_executor: Any, ros_processes: Any
 
 # (c) -------------------------------------------------------------------------------------------
 
+@pytest.mark.smoke
 @pytest.mark.parametrize('name', sorted(CONTRACT_SRVS))
 def test_service_round_trip(name: str, ros_executor: Any) -> None:
     from rclpy.node import Node

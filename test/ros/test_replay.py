@@ -204,6 +204,7 @@ def test_clock_is_synthesised_from_log_times(tmp_path, ros_context, executor, ro
     assert is_subsequence(clock, stamps) and len(clock) >= 0.9 * len(stamps)
 
 
+@pytest.mark.smoke
 def test_replay_of_a_reference_bag(ros_context, executor, ros_processes):
     """bags/default_4s.mcap (a ``run --record`` recording) replays byte for byte."""
     path = pathlib.Path(__file__).resolve().parents[2] / 'bags' / 'default_4s.mcap'

@@ -117,6 +117,7 @@ def _assert_consecutive(driver: Driver, after_reset: int = 0) -> None:
         assert stamps == [k * 1_000_000 for k in steps]
 
 
+@pytest.mark.smoke
 def test_split_streams_are_consecutive_and_identical_to_composed_and_reruns(
         ros_context, ros_processes, tmp_path):
     composed, composed_counts, composed_driver = run_composed(ros_context, 'probe_c1')

@@ -23,6 +23,7 @@ def twin(conveyor_twin_factory) -> LockstepTwin:
     return conveyor_twin_factory(quiet_cell(), seed=7, chunk=50)
 
 
+@pytest.mark.smoke
 def test_lockstep_step_advances_exactly_n_and_every_stream_has_consecutive_steps(twin):
     assert twin.step(25) == 25
     assert twin.time_ns == 25_000_000
