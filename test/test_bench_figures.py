@@ -3,7 +3,7 @@ paced floor loop and the twin's overruns as a ratio to it."""
 
 import numpy as np
 
-from conveyor_twin.bench.twin import cpu_times, steal_percent
+from conveyor_twin.bench.cpu import cpu_times, steal_percent
 
 
 def test_steal_share_of_all_cpu_time():

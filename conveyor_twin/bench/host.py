@@ -29,7 +29,7 @@ from typing import Dict, List
 
 import numpy as np
 
-from conveyor_twin.bench.twin import cpu_times, steal_percent
+from conveyor_twin.bench.cpu import cpu_times, steal_percent
 
 # gap classes [ms]: (low, high)
 GAP_CLASSES = ((0.5, 1.0), (1.0, 2.0), (2.0, 5.0), (5.0, 20.0), (20.0, float('inf')))

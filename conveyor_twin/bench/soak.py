@@ -37,7 +37,7 @@ from typing import Dict, IO, List, Optional, Tuple
 
 import numpy as np
 
-from conveyor_twin.bench.twin import cpu_times, steal_percent
+from conveyor_twin.bench.cpu import cpu_times, steal_percent
 
 DEFAULT_DURATION = 3600.0   # s of wall time
 DEFAULT_SAMPLE_PERIOD = 10.0  # s between samples

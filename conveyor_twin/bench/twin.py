@@ -42,6 +42,8 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
+from conveyor_twin.bench.cpu import cpu_times, steal_percent
+
 DEFAULT_DURATION = 60.0   # s measured
 DEFAULT_PARTS = 1000
 DEFAULT_SETTLE = 3.0      # s between placing the parts and measuring
@@ -259,25 +261,6 @@ def _signal_group(pid: int, sig: int) -> None:
         os.killpg(pid, sig)
     except ProcessLookupError:
         pass
-
-
-def cpu_times() -> Optional[List[int]]:
-    """Return the machine's aggregate CPU times (``/proc/stat`` line ``cpu``, jiffies), or
-    None where there is no such file."""
-    try:
-        with open('/proc/stat') as f:
-            return [int(v) for v in f.readline().split()[1:]]
-    except (OSError, ValueError):
-        return None
-
-
-def steal_percent(before: Optional[List[int]], after: Optional[List[int]]) -> Optional[float]:
-    """Return the share of CPU time the hypervisor gave to others between two
-    :func:`cpu_times` readings (``steal``, the 8th field) [%], or None if unknown."""
-    if not before or not after or len(before) < 8:
-        return None
-    total = sum(after[:8]) - sum(before[:8])
-    return round(100.0 * (after[7] - before[7]) / total, 2) if total > 0 else None
 
 
 def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[str, object]:

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from conveyor_twin.bench.twin import cpu_times, steal_percent
+from conveyor_twin.bench.cpu import cpu_times, steal_percent
 from conveyor_twin.record import reader
 from conveyor_twin.record.topics import stamp_ns
 from conveyor_twin.wire.cdr import decode_clock
