@@ -1,1 +1,1 @@
-"""ROS 2 nodes: thin translators between the cores and topics (the only place with rclpy)."""
+"""ROS 2 nodes: thin translators between the cores and topics (no core package imports rclpy)."""
