@@ -85,6 +85,17 @@ if [[ -z "${PYTHON:-}" ]]; then
         "$py" -c '' < /dev/null > /dev/null 2>&1 && { PYTHON=$py; break; }
     done
 fi
+# A bare name that does not run may be a pyenv shim of an installed, inactive version: take that
+# version's interpreter (the newest installed one of that name).
+if [[ "$PYTHON" != */* ]] && ! "$PYTHON" -c '' < /dev/null > /dev/null 2>&1 \
+        && command -v pyenv > /dev/null 2>&1; then
+    for candidate in $(ls -d "$(pyenv root)"/versions/*/bin/"$PYTHON" 2>/dev/null | sort -rV); do
+        if "$candidate" -c '' < /dev/null > /dev/null 2>&1; then
+            PYTHON=$candidate
+            break
+        fi
+    done
+fi
 "$PYTHON" -c '' < /dev/null > /dev/null 2>&1 \
     || die "$PYTHON does not run: install Python 3.11 or 3.12, or set PYTHON to one that runs"
 py_version=$("$PYTHON" -c 'import sys; print("%d.%d" % sys.version_info[:2])')
