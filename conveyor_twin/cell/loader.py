@@ -359,10 +359,10 @@ def _zone(r: _Reader) -> Zone:
     region = r.rect('region')
     resolution = r.number('resolution', 0.01, low=0.0, high=1.0, low_open=True)
     a = r.section('auto')
-    to_micro = a.number('to_micro_density', 1500.0, low=0.0, high=1e7)
+    to_micro = a.number('to_micro_density', 1500.0, low=0.0, high=1e12)
     auto = AutoSwitch(
         tile=a.number('tile', 0.25, low=resolution, high=100.0),
-        to_macro_density=a.number('to_macro_density', 4000.0, low=to_micro, high=1e7,
+        to_macro_density=a.number('to_macro_density', 4000.0, low=to_micro, high=1e12,
                                   low_open=True),
         to_micro_density=to_micro,
         min_dwell=a.number('min_dwell', 0.5, low=0.0, high=1e6),

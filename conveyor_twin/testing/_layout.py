@@ -86,10 +86,10 @@ def start_layout(cell: Cell, cell_file: Optional[str], *, seed: int, layout: Lay
     if cell_file is None and not cell.source_file.startswith('<embedded'):
         raise ValueError(f'the split layout loads the cell in each process: pass a cell file, '
                          f'not a cell built in memory ({cell.source_file})')
-    from conveyor_twin.ros.split import _ros_args
+    from conveyor_twin.ros.split import ros_args
 
-    args = _ros_args(os.path.abspath(cell_file) if cell_file else '', seed, 'lockstep', 0.0,
-                     None, 0.0)
+    args = ros_args(os.path.abspath(cell_file) if cell_file else '', seed, 'lockstep', 0.0,
+                    None, 0.0)
     processes = RosProcesses(domain_id=domain_id)
     log_dir = Path(tempfile.mkdtemp(prefix='conveyor_twin_split_'))
     for module in SPLIT_MODULES:

@@ -50,7 +50,8 @@ def command_result(status: DiagnosticStatus) -> CommandResult:
 
 
 def _command_key(topic: str, target: str, value: float) -> tuple:
-    return topic, target, repr(float(value))
+    # a ROS string ends at its first NUL: the twin sees (and answers with) only that much
+    return topic, target.split('\x00', 1)[0], repr(float(value))
 
 
 class Driver:

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from conveyor_twin.cell import load_cell
-from conveyor_twin.coord.stages import MacroStage, MicroStage
+from conveyor_twin.coord.assembly import build_twin
+from conveyor_twin.coord.stages import MicroStage
 from conveyor_twin.coord.twin import Twin
 
 EXAMPLES = Path(__file__).resolve().parents[2] / 'conveyor_twin' / 'cell' / 'examples'
@@ -55,11 +56,9 @@ def test_example_cell_is_packaged_beside_the_default_cell(name: str) -> None:
 def test_multiscale_cell_shows_density_early_and_conserves_every_part() -> None:
     cell = load_cell(EXAMPLES / 'multiscale.yaml')
     assert [z.policy for z in cell.zones] == ['macro']
-    micro, macro = MicroStage(cell, cell.settings.seed), MacroStage(cell)
-    twin = Twin(cell, seed=cell.settings.seed, stages=[micro, macro])
-    coupling = twin.stages[-1]
-    coupling.check = True      # the ledger is checked every step: BalanceError otherwise
-    assert coupling.enabled
+    built = build_twin(cell, seed=cell.settings.seed, check_balance=True)
+    micro, macro, coupling, twin = built.micro, built.macro, built.coupling, built.twin
+    assert coupling.enabled and coupling.check  # ledger checked every step: BalanceError
     twin.step(1500)
     grid = macro.grids[0]
     led = coupling.ledger()

@@ -178,7 +178,8 @@ def test_defaults_are_derived() -> None:
 def test_validate_verb_exit_codes(tmp_path: Path, default_doc: dict, capsys) -> None:
     assert cli_main(['validate']) == 0
     out = capsys.readouterr().out
-    assert 'seed_test_rig' in out and 'deflector' in out and out.count('\n') == 1
+    assert 'seed_test_rig' in out and 'deflector' in out and out.count('\n') == 2
+    assert 'conveyor-twin plot default -o cell.png' in out
     default_doc['sources'][0]['part_type'] = 'bolt'
     path = _write(tmp_path, default_doc)
     assert cli_main(['validate', str(path)]) == 1

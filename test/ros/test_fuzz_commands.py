@@ -19,8 +19,12 @@ from conveyor_twin_msgs.srv import Reset, SpawnParts, Step
 import numpy as np
 import pytest
 
+from conveyor_twin.cell import load_cell
+from conveyor_twin.coord.timing import TimeMode
+from conveyor_twin.ros.compose import ComposedTwin
+from conveyor_twin.testing import quiet_cell
+from conveyor_twin.testing.driver import Driver
 from conveyor_twin.wire import cdr
-from test.ros.test_twin_nodes import Harness, quiet_cell
 
 pytestmark = pytest.mark.ros
 SEED = 20261123
@@ -32,6 +36,21 @@ VALUES = (0.0, 0.1, -0.1, 0.5, 1.0, 2.0, -2.0, 2.0000001, math.nan, math.inf, -m
           1e308, -1e308, 5e-324, 1e9, 0.05, 0.3)
 PATHS = ('', 'missing.yaml', 'a\x00b.yaml', 'x' * 5000, '/', '/dev/null', '/proc/self/status',
          '\x00')
+
+
+class Harness(Driver):
+    """A composed lockstep twin (its cores inspected after every input) and a driver."""
+
+    def __init__(self, context, *, seed: int = 7, cell=None) -> None:
+        self.twin = ComposedTwin(cell or load_cell(), seed=seed, mode=TimeMode.LOCKSTEP,
+                                 context=context, markers_rate=0.0)
+        self.twin.start()
+        super().__init__(context)
+        assert self.wait_connected(), 'twin not discovered'
+
+    def close(self) -> None:
+        super().close()
+        self.twin.stop()
 
 
 def value(rng: random.Random) -> float:
@@ -78,7 +97,7 @@ def send(h: Harness, rng: random.Random, tally: dict) -> str:
     if kind in ('belt', 'actuator'):
         msg = (BeltCommand(belt=name(rng), speed=value(rng)) if kind == 'belt'
                else ActuatorCommand(actuator=name(rng), position=value(rng)))
-        h.command(h.belt_pub if kind == 'belt' else h.actuator_pub, msg)
+        h.command(msg)
         return f'{kind} {msg.belt if kind == "belt" else msg.actuator!r:.40} ' \
                f'{msg.speed if kind == "belt" else msg.position!r}'
     if kind == 'spawn':
