@@ -86,7 +86,7 @@ def stop_process(process: subprocess.Popen, timeout: float = STOP_TIMEOUT) -> Op
 
 
 def stop_all_started() -> None:
-    """Stop every process any :class:`RosProcesses` of this session started and left running."""
+    """Stop every process any :class:`RosProcesses` started in this process and left running."""
     while _started:
         process = _started.pop()
         if process.poll() is None:
