@@ -58,7 +58,9 @@ class CommandBook:
         """Number of commands rejected so far."""
         return sum(self.rejected.values())
 
-    def _reject(self, reason: str, message: str) -> CommandRejected:
+    def reject(self, reason: str, message: str) -> CommandRejected:
+        """Count a rejection under ``reason`` (e.g. from another command channel); return the
+        error to report, with ``message``."""
         with self._lock:
             self.rejected[reason] += 1
             self.last_rejection = message
@@ -68,14 +70,14 @@ class CommandBook:
         """Return the valid belt command or raise :class:`CommandRejected`."""
         if belt not in self._belts:
             known = ', '.join(self._belts)
-            raise self._reject('unknown_belt', f'belt_command: unknown belt {belt!r} '
+            raise self.reject('unknown_belt', f'belt_command: unknown belt {belt!r} '
                                f'(known: {known})')
         index, max_speed = self._belts[belt]
         if not math.isfinite(speed):
-            raise self._reject('not_finite', f'belt_command: speed {speed!r} for belt {belt!r} '
+            raise self.reject('not_finite', f'belt_command: speed {speed!r} for belt {belt!r} '
                                'is not finite')
         if abs(speed) > max_speed:
-            raise self._reject('out_of_range', f'belt_command: speed {speed!r} m/s for belt '
+            raise self.reject('out_of_range', f'belt_command: speed {speed!r} m/s for belt '
                                f'{belt!r} is outside [{-max_speed:g}, {max_speed:g}] m/s')
         return Command(BELT, belt, index, float(speed))
 
@@ -83,14 +85,14 @@ class CommandBook:
         """Return the valid actuator command or raise :class:`CommandRejected`."""
         if actuator not in self._actuators:
             known = ', '.join(self._actuators) or 'none'
-            raise self._reject('unknown_actuator', f'actuator_command: unknown actuator '
+            raise self.reject('unknown_actuator', f'actuator_command: unknown actuator '
                                f'{actuator!r} (known: {known})')
         index, low, high, unit = self._actuators[actuator]
         if not math.isfinite(position):
-            raise self._reject('not_finite', f'actuator_command: position {position!r} for '
+            raise self.reject('not_finite', f'actuator_command: position {position!r} for '
                                f'actuator {actuator!r} is not finite')
         if not low <= position <= high:
-            raise self._reject('out_of_range', f'actuator_command: position {position!r} '
+            raise self.reject('out_of_range', f'actuator_command: position {position!r} '
                                f'{unit} for actuator {actuator!r} is outside '
                                f'[{low:g}, {high:g}] {unit}')
         return Command(ACTUATOR, actuator, index, float(position))

@@ -72,7 +72,8 @@ class CoordinatorNode(Node):
         self.runner = runner
         self.parameters = declare_twin_parameters(self, step_s=twin.cell.settings.step)
         self._spawn = spawn
-        self._counters = counters or (lambda: {})
+        self._counter_sources: List[Callable[[], Dict[str, float]]] = (
+            [counters] if counters else [])
         self._last_log = 0.0
         self._frame = twin.cell.settings.frame_id
         self.streams = StreamPublisher(self, STREAMS)
@@ -223,6 +224,20 @@ class CoordinatorNode(Node):
         return False
 
     # -- commands ------------------------------------------------------------------------
+    def _counters(self) -> Dict[str, float]:
+        out: Dict[str, float] = {}
+        for source in self._counter_sources:
+            out.update(source())
+        return out
+
+    def add_counters(self, source: Callable[[], Dict[str, float]]) -> None:
+        """Add ``source``'s counters to the diagnostics and the summary (e.g. a viewer's)."""
+        self._counter_sources.append(source)
+
+    def report_rejected(self, exc: CommandRejected) -> None:
+        """Log a rejected command (throttled); the command book has counted it."""
+        self._rejected(exc)
+
     def _rejected(self, exc: CommandRejected) -> None:
         now = time.monotonic()
         if now - self._last_log >= LOG_THROTTLE:

@@ -93,7 +93,7 @@ def attach(composed: Any, address: str, *, stream_rate: float = DEFAULT_STREAM_R
             else:
                 twin.commands.submit_actuator(name, value)
         except CommandRejected as exc:
-            coordinator._rejected(exc)
+            coordinator.report_rejected(exc)
             return str(exc)
         return None
 
@@ -109,9 +109,7 @@ def attach(composed: Any, address: str, *, stream_rate: float = DEFAULT_STREAM_R
     view.on_invalid = lambda reason: _count_invalid(twin, coordinator, reason)
     view.start(host, port)
     composed.output.subscribe(_FrameFeed(view, names))
-    base_counters = coordinator._counters
-    coordinator._counters = lambda: {
-        **base_counters(), **{f'foxglove_{k}': v for k, v in view.counters().items()}}
+    coordinator.add_counters(lambda: {f'foxglove_{k}': v for k, v in view.counters().items()})
     coordinator.declare_parameter(
         'foxglove', f'{host}:{view.port}',
         ParameterDescriptor(description='address of the Foxglove WebSocket server '
@@ -122,4 +120,4 @@ def attach(composed: Any, address: str, *, stream_rate: float = DEFAULT_STREAM_R
 def _count_invalid(twin: Any, coordinator: Any, reason: str) -> None:
     """Count a client message that is no valid command (undecodable, other topic) like a
     rejected command: in ``diagnostics`` and the log."""
-    coordinator._rejected(twin.commands._reject('foxglove_invalid', reason))
+    coordinator.report_rejected(twin.commands.reject('foxglove_invalid', reason))
