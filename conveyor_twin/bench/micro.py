@@ -186,16 +186,33 @@ def max_penetration(sim: MicroSim) -> float:
 
 
 def pymunk_space(n: int):
-    """Return (space, belt drive function) of the scene in pymunk with ``n`` discs."""
+    """Return (space, belt drive function, step) of the scene in pymunk with ``n`` discs."""
+    cell = scene(n)
+    return pymunk_peer(cell, lattice(cell, n))
+
+
+def pymunk_peer(cell: Cell, positions: np.ndarray, *, iterations: Optional[int] = None,
+                slop: Optional[float] = None, step: Optional[float] = None):
+    """Return (space, belt drive function, step) of ``cell`` in pymunk.
+
+    Discs of the cell's first part type stand at ``positions`` ((n, 2) [m]) moving at the belt
+    speed; every obstacle is a static segment as thick as it is; the coefficients are matched
+    per pair. One belt runs along +x under every disc; the drive relaxes each velocity toward
+    it by at most ``mu g dt`` and the spin by the matching torque, as ours does.
+    ``iterations``: pymunk's solver iterations (default: pymunk's 10); ``slop``: its
+    ``collision_slop`` (default: the cell's penetration slop); ``step``: the step [s] the drive
+    is sized for (default: the cell's).
+    """
     import pymunk
     import pymunk.batch
 
-    cell = scene(n)
     part = cell.part_types[0]
     belt = cell.belts[0]
-    dt = cell.settings.step
+    dt = cell.settings.step if step is None else step
     space = pymunk.Space()
-    space.collision_slop = cell.micro.penetration_slop
+    if iterations is not None:
+        space.iterations = int(iterations)
+    space.collision_slop = cell.micro.penetration_slop if slop is None else slop
     # pymunk multiplies the two shapes' coefficients: discs carry sqrt(pair value)
     mu_pp = 0.5 * (part.friction_static + part.friction_sliding)
     disc_mu = math.sqrt(mu_pp)
@@ -206,7 +223,7 @@ def pymunk_space(n: int):
         seg.friction = obstacle.friction / disc_mu
         seg.elasticity = obstacle.restitution / disc_e
         space.add(seg)
-    for x, y in lattice(cell, n):
+    for x, y in positions:
         body = pymunk.Body(part.mass, part.inertia)
         body.position = (x, y)
         body.velocity = (belt.speed, 0.0)

@@ -7,6 +7,7 @@ from typing import List
 # what -> module with ``main(argv: List[str]) -> int``
 BENCHES = {
     'micro': 'conveyor_twin.bench.micro',
+    'clog': 'conveyor_twin.bench.clog',
     'macro': 'conveyor_twin.bench.macro',
     'record': 'conveyor_twin.bench.record',
     'twin': 'conveyor_twin.bench.twin',
