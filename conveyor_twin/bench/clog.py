@@ -202,12 +202,17 @@ class Watch:
     def result(self, window: float, wall_s: float) -> Dict:
         n = self.passed.size
         passed = int(self.passed.sum())
-        quiet = self.last_pass is None or self.last_pass <= window - QUIET
+        quiet = self.last_pass is None or self.last_pass <= window - quiet_time(window)
         d = 2.0 * self.radius
         return {'passed': passed, 'fraction_passed': passed / n if n else 0.0,
                 'stopped': bool(quiet and passed < n),
                 'last_pass_s': self.last_pass,
                 'max_overlap_pct': 100.0 * self.deepest / d, 'wall_s': wall_s}
+
+
+def quiet_time(window: float) -> float:
+    """Return the span at the end of a ``window`` [s] without passages that means stopped."""
+    return min(QUIET, window)
 
 
 def _samples(window: float, dt: float):
@@ -297,7 +302,8 @@ def run(gaps: Sequence[float], seeds: int, parts: int, window: float, *,
         pymunk: bool = True, iterations: int = PYMUNK_ITERATIONS, slop: float = PYMUNK_SLOP,
         step: float = PYMUNK_STEP, progress=None) -> Dict:
     """Run the benchmark; return its report (see :func:`main` for the keys)."""
-    report: Dict = {'parts': parts, 'seeds': seeds, 'window_s': window, 'quiet_s': QUIET,
+    report: Dict = {'parts': parts, 'seeds': seeds, 'window_s': window,
+                    'quiet_s': quiet_time(window),
                     'sample_s': SAMPLE,
                     'pymunk': {'iterations': iterations, 'slop_m': slop, 'step_s': step}
                     if pymunk else None, 'gaps': {}}
@@ -359,8 +365,8 @@ def main(argv: List[str]) -> int:
     parser.add_argument('--pymunk-step', type=float, default=PYMUNK_STEP, help='[s]')
     args = parser.parse_args(argv)
     gaps = [float(g) for g in args.gaps.split(',') if g]
-    if args.seeds < 1 or args.parts < 1 or args.window <= QUIET:
-        parser.error(f'--seeds and --parts at least 1, --window longer than {QUIET} s')
+    if args.seeds < 1 or args.parts < 1 or args.window <= 0.0 or not gaps:
+        parser.error('--gaps not empty, --seeds and --parts at least 1, --window positive')
     t0 = time.perf_counter()
     report = run(gaps, args.seeds, args.parts, args.window, pymunk=not args.skip_pymunk,
                  iterations=args.pymunk_iterations, slop=args.pymunk_slop,
@@ -371,7 +377,8 @@ def main(argv: List[str]) -> int:
         print(json.dumps(report))
         return 0
     print(f'{args.parts} parts, {args.seeds} seeds per gap, {args.window:g} s window; stopped: '
-          f'no passage in the last {QUIET:g} s with parts upstream (95 % Wilson interval); '
+          f'no passage in the last {report["quiet_s"]:g} s with parts upstream (95 % Wilson '
+          'interval); '
           f'default gap {report["default_gap_m"] * 1e3:.0f} mm')
     if report['pymunk']:
         p = report['pymunk']
