@@ -55,9 +55,9 @@ SAMPLE = 0.01                       # s between two looks at the positions
 RELEASE_PITCH = 1.1                 # lattice pitch of the release [part diameters]
 RELEASE_JITTER = 0.04               # largest random move of a released centre [diameters]
 RELEASE_MARGIN = 0.002              # m between the release block and the deflector / walls
-PYMUNK_ITERATIONS = 60
+PYMUNK_ITERATIONS = 150
 PYMUNK_SLOP = 1e-4                  # m
-PYMUNK_STEP = 5e-4                  # s
+PYMUNK_STEP = 2.5e-4                # s
 
 
 def _deflector(cell: Cell) -> int:
@@ -300,8 +300,11 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple:
 
 def run(gaps: Sequence[float], seeds: int, parts: int, window: float, *,
         pymunk: bool = True, iterations: int = PYMUNK_ITERATIONS, slop: float = PYMUNK_SLOP,
-        step: float = PYMUNK_STEP, progress=None) -> Dict:
-    """Run the benchmark; return its report (see :func:`main` for the keys)."""
+        step: float = PYMUNK_STEP, on_gap=None) -> Dict:
+    """Run the benchmark; return its report.
+
+    ``on_gap(key, entry)`` is called after each gap with its runs and summaries.
+    """
     report: Dict = {'parts': parts, 'seeds': seeds, 'window_s': window,
                     'quiet_s': quiet_time(window),
                     'sample_s': SAMPLE,
@@ -320,12 +323,12 @@ def run(gaps: Sequence[float], seeds: int, parts: int, window: float, *,
             if pymunk:
                 entry['pymunk'].append(run_pymunk(cell, pts, window, iterations=iterations,
                                                   slop=slop, step=step))
-            if progress:
-                progress(gap, seed, entry)
         entry['summary'] = {'ours': summary(entry['ours'])}
         if pymunk:
             entry['summary']['pymunk'] = summary(entry['pymunk'])
         report['gaps'][f'{gap:g}'] = entry
+        if on_gap:
+            on_gap(f'{gap:g}', entry)
     return report
 
 
@@ -367,28 +370,34 @@ def main(argv: List[str]) -> int:
     gaps = [float(g) for g in args.gaps.split(',') if g]
     if args.seeds < 1 or args.parts < 1 or args.window <= 0.0 or not gaps:
         parser.error('--gaps not empty, --seeds and --parts at least 1, --window positive')
+    if not args.json:
+        print(f'{args.parts} parts, {args.seeds} seeds per gap, {args.window:g} s window; '
+              f'stopped: no passage in the last {quiet_time(args.window):g} s with parts '
+              'upstream (95 % Wilson interval)')
+        if not args.skip_pymunk:
+            print(f'pymunk: {args.pymunk_iterations} iterations, slop {args.pymunk_slop:g} m, '
+                  f'step {args.pymunk_step:g} s', flush=True)
     t0 = time.perf_counter()
     report = run(gaps, args.seeds, args.parts, args.window, pymunk=not args.skip_pymunk,
                  iterations=args.pymunk_iterations, slop=args.pymunk_slop,
-                 step=args.pymunk_step)
+                 step=args.pymunk_step,
+                 on_gap=None if args.json else lambda key, e: print(_line(key, e), flush=True))
     report['wall_s'] = time.perf_counter() - t0
     report['literature'] = LITERATURE
     if args.json:
         print(json.dumps(report))
         return 0
-    print(f'{args.parts} parts, {args.seeds} seeds per gap, {args.window:g} s window; stopped: '
-          f'no passage in the last {report["quiet_s"]:g} s with parts upstream (95 % Wilson '
-          'interval); '
-          f'default gap {report["default_gap_m"] * 1e3:.0f} mm')
-    if report['pymunk']:
-        p = report['pymunk']
-        print(f'pymunk: {p["iterations"]} iterations, slop {p["slop_m"]:g} m, '
-              f'step {p["step_s"]:g} s')
-    for gap, entry in report['gaps'].items():
-        print(_line(gap, entry))
     print(LITERATURE)
-    print(f'wall time {report["wall_s"]:.0f} s')
+    print(f'wall time {report["wall_s"]:.0f} s (load average {_load()})')
     return 0
+
+
+def _load() -> str:
+    try:
+        with open('/proc/loadavg', encoding='ascii') as f:
+            return f.read().split()[0]
+    except OSError:
+        return 'unknown'
 
 
 if __name__ == '__main__':
