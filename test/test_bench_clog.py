@@ -80,3 +80,9 @@ def test_wilson_interval():
     lo, hi = clog.wilson(5, 10)
     assert lo < 0.5 < hi and lo == pytest.approx(1.0 - hi)
     assert clog.wilson(1, 10) == pytest.approx(tuple(1.0 - b for b in clog.wilson(9, 10)[::-1]))
+
+
+def test_a_gap_that_is_not_positive_or_wider_than_the_cells_is_refused():
+    for gap in (0.0, -1.0, 15.0):
+        with pytest.raises(ValueError):
+            clog.gap_cell(gap)

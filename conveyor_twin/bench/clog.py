@@ -107,8 +107,9 @@ def gap_cell(gap: float, base: Optional[Cell] = None) -> Cell:
     (ax, ay), (bx, by) = deflector.points
     u = np.array([bx - ax, by - ay]) / math.hypot(bx - ax, by - ay)
     want = gap * 2.0 * cell.part_types[0].radius
-    if want > clearance(cell):
-        raise ValueError(f'gap {gap} d is wider than the cell\'s {clearance(cell):.3f} m')
+    if not 0.0 < want <= clearance(cell):
+        raise ValueError(f'gap {gap} d is not positive or wider than the cell\'s '
+                         f'{clearance(cell):.3f} m')
 
     def moved(s: float) -> Cell:
         points = ((ax, ay), (bx + s * u[0], by + s * u[1]))
@@ -374,8 +375,8 @@ def main(argv: List[str]) -> int:
     parser.add_argument('--pymunk-step', type=float, default=PYMUNK_STEP, help='[s]')
     args = parser.parse_args(argv)
     gaps = [float(g) for g in args.gaps.split(',') if g]
-    if args.seeds < 1 or args.parts < 1 or args.window <= 0.0 or not gaps:
-        parser.error('--gaps not empty, --seeds and --parts at least 1, --window positive')
+    if args.seeds < 1 or args.parts < 1 or args.window <= 0.0 or not gaps or min(gaps) <= 0:
+        parser.error('--gaps positive, --seeds and --parts at least 1, --window positive')
     if not args.json:
         print(f'{args.parts} parts, {args.seeds} seeds per gap, {args.window:g} s window; '
               f'stopped: no passage in the last {quiet_time(args.window):g} s with parts '
