@@ -60,11 +60,20 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     code = 0
-    if not node.wait_for_scales(SCALE_CONNECT_TIMEOUT):
+    view = None
+    if params.foxglove:
+        from conveyor_twin.ros.foxglove_bridge import attach_split
+        from conveyor_twin.viz.foxglove_view import FoxgloveError
+        try:
+            view = attach_split(node, params.foxglove)
+        except FoxgloveError as exc:
+            node.get_logger().error(f'{exc}; the twin was not started')
+            code = 2
+    if code == 0 and not node.wait_for_scales(SCALE_CONNECT_TIMEOUT):
         node.get_logger().error('micro_simulator and macro_simulator did not connect within '
                                 f'{SCALE_CONNECT_TIMEOUT:g} s')
         code = 1
-    else:
+    elif code == 0:
         runner.start()
         while not stop.is_set():
             if params.mode is not TimeMode.LOCKSTEP and not runner.running:
@@ -75,6 +84,8 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
             node.get_logger().error(f'simulation stopped: {runner.error!r}')
             code = 1
     print(SUMMARY_PREFIX + json.dumps(node.summary(), sort_keys=True), flush=True)
+    if view is not None:
+        view.stop()
     spin_stop.set()
     for spinner in spinners:
         spinner.join(5.0)
@@ -87,15 +98,17 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
 
 
 def ros_args(cell_file: str, seed: Optional[int], mode: str, duration: float,
-             namespace: Optional[str], markers_rate: float) -> List[str]:
+             namespace: Optional[str], markers_rate: float, *, foxglove: str = '') -> List[str]:
     """Return the ``--ros-args`` of the three processes of a split run (durations [s], rates
-    [Hz])."""
+    [Hz]; ``foxglove``: ``[HOST:]PORT`` of the coordinator's Foxglove view, empty: none)."""
     args = ['--ros-args', '-p', f'mode:={mode}', '-p', f'duration:={float(duration)}',
             '-p', f'markers_rate:={float(markers_rate)}']
     if cell_file:  # rcl cannot parse an empty override; empty is the default anyway
         args += ['-p', f'cell_file:={cell_file}']
     if seed is not None:
         args += ['-p', f'seed:={seed}']
+    if foxglove:  # quoted: rcl would read a bare port as an integer
+        args += ['-p', f'foxglove:="{foxglove}"']
     if namespace:
         args += ['-r', f'__ns:={namespace}']
     return args

@@ -118,15 +118,29 @@ class LockstepTwin:
         stream and for the twin's answer to every command, so an attached controller reacts
         within ``chunk`` steps
     :param timeout: longest wait for any one answer of the twin or a controller [s]
-    :raises ValueError: on an unknown layout
+    :param foxglove: ``[HOST:]PORT`` to serve a live Foxglove view of the test's twin at (watch
+        a test step by step); None: no view. Composed: port 0 picks a free one, see
+        :attr:`foxglove`; split: the coordinator process serves it, give a port.
+    :raises ValueError: on an unknown layout, an invalid ``foxglove`` address, or port 0 with
+        the split layout
+    :raises conveyor_twin.viz.foxglove_view.FoxgloveError: if the view cannot listen there
     :raises conveyor_twin.cell.CellError: on an invalid cell file
     """
 
     def __init__(self, cell: Union[None, str, Path, Cell] = None, *, seed: int = DEFAULT_SEED,
                  layout: Layout = 'composed', chunk: int = DEFAULT_CHUNK,
-                 timeout: float = TIMEOUT) -> None:
+                 timeout: float = TIMEOUT, foxglove: Optional[str] = None) -> None:
         if chunk < 1:
             raise ValueError(f'chunk must be at least 1 step (got {chunk})')
+        if foxglove is not None:
+            from conveyor_twin.viz.foxglove_view import FoxgloveError, parse_address
+            try:
+                _, port = parse_address(foxglove)
+            except FoxgloveError as exc:
+                raise ValueError(str(exc)) from None
+            if port == 0 and layout == 'split':
+                raise ValueError('foxglove: the split layout serves the view from its own '
+                                 'process; give a port other than 0')
         cell_file = None if cell is None or isinstance(cell, Cell) else os.fspath(cell)
         self.cell: Cell = cell if isinstance(cell, Cell) else load_cell(cell_file)
         self.seed = seed
@@ -156,7 +170,8 @@ class LockstepTwin:
                        signal_handler_options=SignalHandlerOptions.NO)
             self.context = context
             self._running = start_layout(self.cell, cell_file, seed=seed, layout=layout,
-                                         context=self.context, domain_id=self.domain_id)
+                                         context=self.context, domain_id=self.domain_id,
+                                         foxglove=foxglove or '')
             self._driver = Driver(self.context, density_per_step=density_per_step(self.cell),
                                   name='conveyor_twin_test', timeout=timeout)
             if not self._driver.wait_connected():
@@ -205,6 +220,13 @@ class LockstepTwin:
             if self._lease is not None:
                 self._lease.release()
             shutil.rmtree(self._log_dir, ignore_errors=True)
+
+    @property
+    def foxglove(self) -> Any:
+        """The live :class:`~conveyor_twin.viz.foxglove_view.FoxgloveView` of a composed twin
+        started with ``foxglove=`` (its ``port`` is where it listens), else None."""
+        composed = self.composed
+        return composed.foxglove if composed is not None else None
 
     @property
     def composed(self) -> Any:
