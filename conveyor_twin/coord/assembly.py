@@ -36,6 +36,7 @@ from conveyor_twin.coord.stages import MacroStage, MicroStage
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.twin import Twin
 from conveyor_twin.coord.zone_barriers import MacroZoneBarriers, RemoteBarriers
+from conveyor_twin.faults.scenario import Scenario, ScenarioRunner
 
 Layout = Literal['composed', 'coordinator', 'micro', 'macro']
 LAYOUTS: Tuple[str, ...] = ('composed', 'coordinator', 'micro', 'macro')
@@ -75,6 +76,26 @@ class AssembledTwin:
         if self.layout != 'composed':
             raise ValueError(f'only the composed layout steps by itself, not {self.layout!r}')
         return self.twin.step(n)
+
+    def arm_scenario(self, scenario: Scenario) -> ScenarioRunner:
+        """Arm a fault scenario on the coordinator core (``composed`` and ``coordinator``);
+        re-armed after every reset. Triggers on the cell's state need the stages here
+        (``composed``).
+
+        :raises ValueError: for a scenario with triggers in the ``coordinator`` layout.
+        """
+        twin = self.twin
+        if twin is None:
+            raise ValueError(f'the {self.layout} layout has no coordinator core')
+        micro, macro = self.micro, self.macro
+        runner = ScenarioRunner(
+            scenario, twin.faults,
+            edge_count=micro.barrier_edge_count if micro is not None else None,
+            zone_parts=(lambda index: zone_parts(self.cell, micro, macro, index))
+            if micro is not None else None)
+        twin.fault_watchers.append(runner.watch)
+        twin.reset_listeners.append(runner.arm)
+        return runner
 
     def spawn(self, request: SpawnRequest) -> np.ndarray:
         """Place a checked spawn request's parts now (all or nothing); return their ids.
@@ -155,3 +176,15 @@ def build_twin(cell: Cell, *, seed: int, layout: Layout = 'composed',
                              macro_side=side)
     allowed = ', '.join(LAYOUTS)
     raise ValueError(f'unknown layout {layout!r} (allowed: {allowed})')
+
+
+def zone_parts(cell: Cell, micro: MicroStage, macro: Optional[MacroStage], index: int) -> float:
+    """Return the parts in zone ``index``: bodies with their centre in it, plus the parts of
+    its macro density (if it has a grid) [parts]."""
+    x0, y0, x1, y1 = cell.zones[index].region
+    v = micro.sim.parts_view()
+    count = float(np.count_nonzero((v.x >= x0) & (v.x <= x1) & (v.y >= y0) & (v.y <= y1)))
+    if macro is not None:
+        name = cell.zones[index].name
+        count += sum(g.total_parts() for g in macro.grids if g.zone.name == name)
+    return count

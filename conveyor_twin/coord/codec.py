@@ -6,7 +6,8 @@ Split over processes, the coordinator and the two scale nodes talk over hidden t
 
 Coordinator -> scale nodes (first byte: the kind):
 
-- ``S`` step: :func:`step_payload` (step, time [ns], belt speeds, actuator positions, as
+- ``S`` step: :func:`step_payload` (step, time [ns], belt speeds, actuator positions, then the
+  step's fault events as uint32 length + UTF-8 JSON, length 0 on the usual step without any, as
   :func:`pack_step_input`);
 - ``R`` reset: :func:`reset_payload` (uint64 seed, cell file as UTF-8, empty: the current cell);
 - ``P`` spawn: :func:`spawn_payload` (uint16 part type index, then x, y, yaw as float64 rows);
@@ -35,6 +36,7 @@ from typing import Dict, List, Sequence, Tuple
 import numpy as np
 
 from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.faults.book import FaultEvent
 from conveyor_twin.micro.sim import MicroSim
 from conveyor_twin.micro.state import C_ENTERED, C_N, C_NEXT_ID, P_ROWS
 
@@ -102,18 +104,29 @@ def parse_stamped(payload: bytes) -> Tuple[int, memoryview]:
 # --- coordinator -> scale nodes ---
 def pack_step_input(inp: StepInput) -> bytes:
     """Return the byte form of a step input."""
+    faults = (json.dumps([e.as_dict() for e in inp.faults]).encode('utf-8') if inp.faults
+              else b'')
     return b''.join((_STEP_HEADER.pack(inp.step, inp.time_ns, inp.belt_speed.size,
                                        inp.actuator_position.size),
                      inp.belt_speed.astype('<f8').tobytes(),
-                     inp.actuator_position.astype('<f8').tobytes()))
+                     inp.actuator_position.astype('<f8').tobytes(),
+                     _U32.pack(len(faults)), faults))
 
 
 def unpack_step_input(data: bytes) -> StepInput:
     """Rebuild a :class:`StepInput` from :func:`pack_step_input` bytes (the same float64s)."""
     step, time_ns, nb, na = _STEP_HEADER.unpack_from(data, 0)
-    belts = np.frombuffer(data, '<f8', nb, _STEP_HEADER.size).astype(np.float64)
-    actuators = np.frombuffer(data, '<f8', na, _STEP_HEADER.size + 8 * nb).astype(np.float64)
-    return StepInput(step, time_ns, belts, actuators)
+    off = _STEP_HEADER.size
+    belts = np.frombuffer(data, '<f8', nb, off).astype(np.float64)
+    actuators = np.frombuffer(data, '<f8', na, off + 8 * nb).astype(np.float64)
+    off += 8 * (nb + na)
+    faults: tuple = ()
+    if len(data) >= off + _U32.size:
+        length, = _U32.unpack_from(data, off)
+        if length:
+            text = bytes(data[off + _U32.size:off + _U32.size + length]).decode('utf-8')
+            faults = tuple(FaultEvent.from_dict(e) for e in json.loads(text))
+    return StepInput(step, time_ns, belts, actuators, faults)
 
 
 def step_payload(inp: StepInput) -> bytes:

@@ -477,7 +477,8 @@ class ScaleCoupling:
         """Return the part balance [parts]: entered, micro, macro, pending, left, residual.
 
         ``entered`` counts parts from sources, spawn requests and macro inflow; parts released
-        by the hand-over are not new. ``residual = entered - micro - macro - pending - left``.
+        by the hand-over are not new. ``residual = entered - micro - macro - pending - left -
+        vanished`` (``vanished``: parts that fell off the line, fault ``parts_vanish``).
         """
         c = self.micro.counters()
         micro_entered = c['entered'] - self.released
@@ -488,9 +489,11 @@ class ScaleCoupling:
         pending = sum(r.pending() for r in self.regions)
         left = float(c['left']) + self.left_macro
         micro_n = float(c['in_flight'])
-        residual = entered - micro_n - macro - pending - left - float(c['handed_over'])
+        vanished = float(c.get('vanished', 0))
+        residual = (entered - micro_n - macro - pending - left - float(c['handed_over'])
+                    - vanished)
         out = {'entered': entered, 'micro': micro_n, 'macro': macro, 'pending': pending,
-               'left': left, 'residual': residual, 'captured': float(self.captured),
+               'left': left, 'vanished': vanished, 'residual': residual, 'captured': float(self.captured),
                'released': float(self.released)}
         # per part type: whole parts held by the macro scale (deposited, not yet released or
         # sunk) and the type ledger's residual (typed entries vs mass, see check_balance)
