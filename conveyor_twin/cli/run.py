@@ -44,6 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--foxglove-rate', type=float, default=50.0,
                    help='rate of the every-step streams sent to Foxglove clients [Hz] '
                    '(composed layout; split: 50)')
+    p.add_argument('--scenario', default='', metavar='FILE',
+                   help='fault scenario YAML: faults by step or time, or triggered by the '
+                   "cell's state (docs/faults.md); checked before the twin starts")
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
     p.add_argument('--quiet', action='store_true', help='no progress line')
     from conveyor_twin.ros.run_recording import add_arguments
@@ -94,6 +97,14 @@ def run_composed(args: argparse.Namespace) -> int:
         print(f'invalid cell: {exc}', file=sys.stderr)
         return 1
     seed = cell.settings.seed if args.seed is None else args.seed
+    scenario = None
+    if args.scenario:
+        from conveyor_twin.faults.scenario import load_scenario, ScenarioError
+        try:
+            scenario = load_scenario(args.scenario, cell)
+        except ScenarioError as exc:
+            print(f'invalid scenario: {exc}; the twin was not started', file=sys.stderr)
+            return 2
     mode = TimeMode(args.mode)
     max_steps = round(args.duration / cell.settings.step) if args.duration > 0 else None
     context = Context()
@@ -103,7 +114,7 @@ def run_composed(args: argparse.Namespace) -> int:
         twin = ComposedTwin(cell, seed=seed, mode=mode, context=context,
                             namespace=args.namespace, markers_rate=args.markers_rate,
                             max_steps=max_steps, foxglove=args.foxglove or '',
-                            foxglove_rate=args.foxglove_rate)
+                            foxglove_rate=args.foxglove_rate, scenario=scenario)
     except FoxgloveError as exc:
         print(f'conveyor-twin run: {exc}; the twin was not started', file=sys.stderr)
         context.try_shutdown()
@@ -159,12 +170,24 @@ def run_split(args: argparse.Namespace) -> int:
 
     cell_file = os.path.abspath(args.cell) if args.cell else ''
     try:
-        load_cell(cell_file or None)
+        cell = load_cell(cell_file or None)
     except CellError as exc:
         print(f'invalid cell: {exc}', file=sys.stderr)
         return 1
+    scenario_file = os.path.abspath(args.scenario) if args.scenario else ''
+    if scenario_file:
+        from conveyor_twin.faults.scenario import load_scenario, ScenarioError
+        try:
+            if load_scenario(scenario_file, cell).conditional:
+                print('invalid scenario: its triggers on the cell\'s state need the composed '
+                      'layout (no --split); the twin was not started', file=sys.stderr)
+                return 2
+        except ScenarioError as exc:
+            print(f'invalid scenario: {exc}; the twin was not started', file=sys.stderr)
+            return 2
     process_args = ros_args(cell_file, args.seed, args.mode, args.duration, args.namespace,
-                            args.markers_rate, foxglove=args.foxglove or '')
+                            args.markers_rate, foxglove=args.foxglove or '',
+                            scenario=scenario_file)
     env = dict(os.environ)
     modules = ['conveyor_twin.ros.micro_node', 'conveyor_twin.ros.macro_node']
     scales = [subprocess.Popen([sys.executable, '-m', m] + process_args, env=env)

@@ -15,6 +15,7 @@ from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.assembly import build_twin
 from conveyor_twin.coord.runner import raise_thread_priority, realtime_priority, Runner
 from conveyor_twin.coord.timing import TimeMode
+from conveyor_twin.faults.scenario import Scenario
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.producers import CoordinatorOutput, MacroOutput, MicroOutput
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
@@ -37,6 +38,7 @@ class ComposedTwin:
     :param max_steps: stop the stepping thread after this many steps (None: run until stop).
     :param foxglove: ``[HOST:]PORT`` of a live Foxglove view to serve; empty: none.
     :param foxglove_rate: rate of the per-step streams sent to Foxglove clients [Hz].
+    :param scenario: a validated fault scenario to arm (re-armed after every reset).
     :raises conveyor_twin.viz.foxglove_view.FoxgloveError: if the Foxglove server cannot listen
         at ``foxglove`` (nothing is left running).
     """
@@ -44,7 +46,8 @@ class ComposedTwin:
     def __init__(self, cell: Cell, *, seed: int, mode: TimeMode, context: Context,
                  namespace: Optional[str] = None, markers_rate: float = 30.0,
                  max_steps: Optional[int] = None, foxglove: str = '',
-                 foxglove_rate: float = DEFAULT_STREAM_RATE) -> None:
+                 foxglove_rate: float = DEFAULT_STREAM_RATE,
+                 scenario: Optional[Scenario] = None) -> None:
         self.cell = cell
         self.context = context
         self.assembled = build_twin(cell, seed=seed, layout='composed')
@@ -52,10 +55,14 @@ class ComposedTwin:
         self.macro_stage = self.assembled.macro
         self.twin = self.assembled.twin
         self.runner = Runner(self.twin, mode, max_steps=max_steps, on_error=self._on_error)
+        #: The armed fault scenario (None without one).
+        self.scenario = (self.assembled.arm_scenario(scenario) if scenario is not None
+                         else None)
         overrides = parameter_overrides(
             cell_file=cell.source_file if os.path.isfile(cell.source_file) else '', seed=seed,
             mode=mode, markers_rate=markers_rate,
-            duration=max_steps * cell.settings.step if max_steps else 0.0, foxglove=foxglove)
+            duration=max_steps * cell.settings.step if max_steps else 0.0, foxglove=foxglove,
+            scenario=scenario.source_file if scenario is not None else '')
         #: One frame per step of every stream (the nodes, the recorder and other sinks take it).
         self.output = TwinOutput([
             CoordinatorOutput(self.twin,

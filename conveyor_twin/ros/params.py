@@ -24,6 +24,7 @@ class TwinParameters:
     :param duration: stop after this much simulated time [s]; 0 runs until shut down.
     :param foxglove: ``[HOST:]PORT`` of a live Foxglove view the coordinator serves; empty:
         none.
+    :param scenario: fault scenario file the coordinator arms; empty: none.
     """
 
     cell_file: str
@@ -32,6 +33,7 @@ class TwinParameters:
     markers_rate: float
     duration: float
     foxglove: str = ''
+    scenario: str = ''
 
 
 def declare_twin_parameters(node: Node, *, step_s: float = 1e-3) -> TwinParameters:
@@ -60,6 +62,9 @@ def declare_twin_parameters(node: Node, *, step_s: float = 1e-3) -> TwinParamete
     foxglove = declare('foxglove', '',
                        'address [HOST:]PORT of the live Foxglove WebSocket view the coordinator '
                        'serves (host 127.0.0.1 by default); empty: none')
+    scenario = declare('scenario', '',
+                       'fault scenario YAML the coordinator arms at start (docs/faults.md); '
+                       'empty: none')
     declare('namespace', node.get_namespace(),
             'namespace of the twin\'s relative topics and services (set with --namespace or '
             '-r __ns:=...)', ignore_override=True)
@@ -76,14 +81,16 @@ def declare_twin_parameters(node: Node, *, step_s: float = 1e-3) -> TwinParamete
     if markers_rate < 0.0 or duration < 0.0:
         raise ValueError('parameters markers_rate and duration must not be negative')
     return TwinParameters(cell_file, int(seed), time_mode, float(markers_rate), float(duration),
-                          str(foxglove))
+                          str(foxglove), str(scenario))
 
 
 def parameter_overrides(*, cell_file: str, seed: int, mode: TimeMode, markers_rate: float,
-                        duration: float, foxglove: str = '') -> List[Parameter]:
+                        duration: float, foxglove: str = '',
+                        scenario: str = '') -> List[Parameter]:
     """Return the parameter values of a composed run, for the nodes built in this process."""
     return [Parameter('cell_file', value=cell_file), Parameter('seed', value=int(seed)),
             Parameter('mode', value=TimeMode(mode).value),
             Parameter('markers_rate', value=float(markers_rate)),
             Parameter('duration', value=float(duration)),
-            Parameter('foxglove', value=str(foxglove))]
+            Parameter('foxglove', value=str(foxglove)),
+            Parameter('scenario', value=str(scenario))]

@@ -41,6 +41,15 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
     context, params, cell, seed = started
     max_steps = round(params.duration / cell.settings.step) if params.duration > 0 else None
     assembled = build_twin(cell, seed=seed, layout='coordinator')
+    if params.scenario:
+        from conveyor_twin.faults.scenario import load_scenario, ScenarioError
+        try:
+            assembled.arm_scenario(load_scenario(params.scenario, cell))
+        except (ScenarioError, ValueError) as exc:
+            print(f'scale_coordinator: scenario refused, the twin was not started: {exc}',
+                  file=sys.stderr, flush=True)
+            context.try_shutdown()
+            return 2
     runner = Runner(assembled.twin, params.mode, max_steps=max_steps)
     holder: Dict[str, CoordinatorNode] = {}
     node = CoordinatorNode(assembled.twin, runner, context=context,
@@ -98,9 +107,11 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
 
 
 def ros_args(cell_file: str, seed: Optional[int], mode: str, duration: float,
-             namespace: Optional[str], markers_rate: float, *, foxglove: str = '') -> List[str]:
+             namespace: Optional[str], markers_rate: float, *, foxglove: str = '',
+             scenario: str = '') -> List[str]:
     """Return the ``--ros-args`` of the three processes of a split run (durations [s], rates
-    [Hz]; ``foxglove``: ``[HOST:]PORT`` of the coordinator's Foxglove view, empty: none)."""
+    [Hz]; ``foxglove``: ``[HOST:]PORT`` of the coordinator's Foxglove view, empty: none;
+    ``scenario``: the fault scenario file the coordinator arms, empty: none)."""
     args = ['--ros-args', '-p', f'mode:={mode}', '-p', f'duration:={float(duration)}',
             '-p', f'markers_rate:={float(markers_rate)}']
     if cell_file:  # rcl cannot parse an empty override; empty is the default anyway
@@ -109,6 +120,8 @@ def ros_args(cell_file: str, seed: Optional[int], mode: str, duration: float,
         args += ['-p', f'seed:={seed}']
     if foxglove:  # quoted: rcl would read a bare port as an integer
         args += ['-p', f'foxglove:="{foxglove}"']
+    if scenario:
+        args += ['-p', f'scenario:={scenario}']
     if namespace:
         args += ['-r', f'__ns:={namespace}']
     return args
