@@ -96,13 +96,13 @@ class MicroStage:
     def barrier_blocked(self) -> np.ndarray:
         """Blocked flag of every light barrier at the end of the step, as reported (faults
         applied)."""
-        if self.barrier_faults.busy:
+        if self._faults_apply():
             return self._faulted()[0]
         return self._true_blocked()
 
     def barrier_edge_count(self) -> np.ndarray:
         """Edges reported so far by every light barrier (uint32)."""
-        if self.barrier_faults.busy:
+        if self._faults_apply():
             return self._faulted()[1]
         return self.barrier_faults.count(self._true_edge_count())
 
@@ -112,9 +112,13 @@ class MicroStage:
         Edges of barriers in macro zones come after the micro ones, with part id 0; edges made
         by faults last, with part id 0.
         """
-        if self.barrier_faults.busy:
+        if self._faults_apply():
             return self._faulted()[2]
         return self._true_edges()
+
+    def _faults_apply(self) -> bool:
+        """True if this step's barrier values go through the faults (decided once a step)."""
+        return self._reported_step == self._step or self.barrier_faults.busy
 
     def _faulted(self) -> tuple:
         """The step's (blocked, edge count, edges) through the barrier faults, once a step."""

@@ -246,3 +246,14 @@ def test_fault_events_travel_in_the_step_input_bytes():
     back = codec.unpack_step_input(codec.pack_step_input(inp))
     assert back.faults == inp.faults and len(back.faults) == 2
     assert codec.unpack_step_input(codec.pack_step_input(a.twin.prepare())).faults == ()
+
+
+def test_clearing_a_stuck_barrier_reports_the_edge_back_to_the_truth():
+    a, rec = twin()
+    a.step(10)
+    fault = a.twin.faults.inject(FaultSpec('barrier_stuck_blocked', 'lb_exit'))
+    a.step(5)
+    a.twin.faults.clear(fault.id)
+    a.step(3)
+    assert [t for s in rec.steps for t in s['edge_times']] == [11 * DT_NS, 16 * DT_NS]
+    assert a.micro.barrier_edge_count()[barrier(a, 'lb_exit')] == 2
