@@ -43,8 +43,9 @@ CLOCK_QOS = OfferedQos(depth=1, reliability='best_effort')
 COMMAND_QOS = OfferedQos(depth=100)
 #: Diagnostics (1 Hz) and markers (viewer rate).
 SLOW_QOS = OfferedQos(depth=10)
-#: The active faults, sent on change: latched, so a late joiner gets the current set.
-LATCHED_QOS = OfferedQos(depth=1, durability='transient_local')
+#: The active faults, sent on change: latched (transient local), so a late joiner gets the
+#: latest states (the last is the current set); deep enough that a burst of changes is not lost.
+LATCHED_QOS = OfferedQos(depth=100, durability='transient_local')
 
 
 class Kind(str, enum.Enum):

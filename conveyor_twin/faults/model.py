@@ -206,8 +206,9 @@ def _params(where: str, kind: Kind, given: Dict[str, float]) -> Dict[str, float]
         if math.isfinite(value) and not (p.low < value if p.open_low else p.low <= value) \
                 or math.isfinite(value) and value > p.high:
             low = '(' if p.open_low else '['
-            raise FaultRejected(f'{where}: parameter {name!r} = {value!r} {p.unit} is outside '
-                                f'{low}{p.low:g}, {p.high:g}]')
+            unit = '' if p.unit == '1' else f' {p.unit}'
+            raise FaultRejected(f'{where}: parameter {name!r} = {value!r}{unit} is outside '
+                                f'{low}{p.low:g}, {p.high:g}]{unit}')
         out[name] = value
     return out
 

@@ -92,7 +92,8 @@ class ResimReport:
         """Return the report as plain data (JSON)."""
         d = self.difference
         return {'path': self.path, 'ok': self.ok, 'steps': self.steps,
-                'commands': self.commands, 'spawns': self.spawns, 'faults': self.faults, 'compared': dict(self.compared),
+                'commands': self.commands, 'spawns': self.spawns, 'faults': self.faults,
+                'compared': dict(self.compared),
                 'compared_total': sum(self.compared.values()),
                 'not_compared': dict(self.skipped), 'complete_source': self.complete_source,
                 'difference': None if d is None else {**vars(d), 'text': str(d)}}

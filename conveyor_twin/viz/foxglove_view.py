@@ -53,7 +53,7 @@ PUBLISH_PERIOD = 0.01
 SCENE_TOPIC = 'scene'
 DENSITY_GRID_TOPIC = 'scene/density'
 #: Streams sent every message (events and slow streams); the others at ``stream_rate``.
-EVERY_MESSAGE = frozenset(('light_barrier_edges', 'diagnostics', 'markers'))
+EVERY_MESSAGE = frozenset(('light_barrier_edges', 'diagnostics', 'markers', 'faults'))
 #: Streams whose latest message the scene is drawn from.
 SCENE_STREAMS = frozenset(('parts', 'light_barriers', 'actuator_states'))
 COMMAND_TOPICS = {'belt_command': 'belt', 'actuator_command': 'actuator'}
@@ -167,8 +167,8 @@ class FoxgloveView:
     def on_frame(self, frame: Frame) -> None:
         """Take the step's frame (stepping thread: cheap, never blocks).
 
-        One frame in :attr:`every` is forwarded whole; of the others only the edges and the
-        diagnostics. Bytes are kept, not copied (the twin builds new bytes every step).
+        One frame in :attr:`every` is forwarded whole; of the others only the edges, the
+        diagnostics and the fault state. Bytes are kept, not copied (the twin builds new bytes every step).
         """
         n = self._frames
         self._frames = n + 1
@@ -179,6 +179,8 @@ class FoxgloveView:
             if frame.diagnostics is not None:
                 self._enqueue(names[streams_contract.DIAGNOSTICS], frame.time_ns,
                               frame.diagnostics)
+            if frame.faults is not None:
+                self._enqueue(names[streams_contract.FAULTS], frame.time_ns, frame.faults)
             return
         for topic, stamp_ns, data in frame.messages():
             self._keep(topic.name, stamp_ns, data)

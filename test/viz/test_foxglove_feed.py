@@ -17,7 +17,8 @@ def _view(**kwargs) -> FoxgloveView:
     return view
 
 
-def _frame(step: int, *, edge: bool = False, diagnostics: bool = False) -> Frame:
+def _frame(step: int, *, edge: bool = False, diagnostics: bool = False,
+           faults: bool = False) -> Frame:
     frame = Frame()
     frame.step = step
     frame.time_ns = step * 1_000_000
@@ -25,18 +26,20 @@ def _frame(step: int, *, edge: bool = False, diagnostics: bool = False) -> Frame
     frame.parts = b'parts%d' % step
     frame.edges = ((frame.time_ns - 500_000, b'edge%d' % step),) if edge else ()
     frame.diagnostics = b'diag%d' % step if diagnostics else None
+    frame.faults = b'faults%d' % step if faults else None
     return frame
 
 
-def test_one_frame_in_every_is_forwarded_whole_and_every_edge_and_diagnostics():
+def test_one_frame_in_every_is_forwarded_whole_and_every_edge_diagnostics_and_fault_state():
     view = _view(stream_rate=50.0)  # 1 kHz steps: one frame in 20
     assert view.every == 20
     for step in range(1, 41):
-        view.on_frame(_frame(step, edge=step == 5, diagnostics=step == 10))
+        view.on_frame(_frame(step, edge=step == 5, diagnostics=step == 10,
+                             faults=step == 12))
     queued = [(topic, stamp) for topic, stamp, _ in view._queue]
     assert queued == [('/clock', 1_000_000), ('/parts', 1_000_000),
                       ('/light_barrier_edges', 4_500_000), ('/diagnostics', 10_000_000),
-                      ('/clock', 21_000_000), ('/parts', 21_000_000)]
+                      ('/faults', 12_000_000), ('/clock', 21_000_000), ('/parts', 21_000_000)]
     assert view._latest['parts'] == (21_000_000, b'parts21')  # what the scene draws
 
 
