@@ -493,7 +493,8 @@ class ScaleCoupling:
         residual = (entered - micro_n - macro - pending - left - float(c['handed_over'])
                     - vanished)
         out = {'entered': entered, 'micro': micro_n, 'macro': macro, 'pending': pending,
-               'left': left, 'vanished': vanished, 'residual': residual, 'captured': float(self.captured),
+               'left': left, 'vanished': vanished, 'residual': residual,
+               'captured': float(self.captured),
                'released': float(self.released)}
         # per part type: whole parts held by the macro scale (deposited, not yet released or
         # sunk) and the type ledger's residual (typed entries vs mass, see check_balance)

@@ -188,7 +188,8 @@ def _entry(err: _Errors, key: str, item: Any, cell: Cell) -> ScenarioEntry:
                              text=f'after {count} edges of {value["barrier"]}')
     names = [z.name for z in cell.zones]
     if value['zone'] not in names:
-        raise err(f'{where}.zone', value['zone'], f'a zone of the cell ({", ".join(names) or "none"})')
+        raise err(f'{where}.zone', value['zone'],
+                  f'a zone of the cell ({", ".join(names) or "none"})')
     count = int(_number(err, f'{where}.count', value['count'], 0, True))
     return ScenarioEntry(spec, trigger, index=names.index(value['zone']), count=count,
                          text=f'more than {count} parts in zone {value["zone"]}')

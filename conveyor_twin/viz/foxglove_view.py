@@ -168,7 +168,8 @@ class FoxgloveView:
         """Take the step's frame (stepping thread: cheap, never blocks).
 
         One frame in :attr:`every` is forwarded whole; of the others only the edges, the
-        diagnostics and the fault state. Bytes are kept, not copied (the twin builds new bytes every step).
+        diagnostics and the fault state. Bytes are kept, not copied (the twin builds new bytes
+        every step).
         """
         n = self._frames
         self._frames = n + 1
