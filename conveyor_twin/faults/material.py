@@ -10,8 +10,8 @@ or deliver the wrong type (no ROS imports).
 - ``source_surge``: the source's rate is multiplied by ``factor``; ``source_wrong_type``: it
   delivers ``part_type``. Both are undone when cleared.
 
-Density in ``macro`` zones is not touched: a rectangle in a macro zone removes the parts there
-only while they are bodies (``auto`` zones hand dense regions to the macro scale).
+The density of ``macro``/``auto`` zones in a vanishing rectangle is removed by the scale
+hand-over (:class:`~conveyor_twin.coord.scale.ScaleCoupling`), which owns the per-type ledger.
 """
 
 from typing import Dict, Sequence, Tuple

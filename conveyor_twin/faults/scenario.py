@@ -174,25 +174,19 @@ def _entry(err: _Errors, key: str, item: Any, cell: Cell) -> ScenarioEntry:
         seconds = _number(err, where, value, 0.0)
         return ScenarioEntry(spec, 'step', step=max(1, int(round(seconds / cell.settings.step))),
                              text=text)
-    if not isinstance(value, dict) or set(value) != {'barrier' if trigger == 'after_edges'
-                                                     else 'zone', 'count'}:
-        names = 'barrier and count' if trigger == 'after_edges' else 'zone and count'
-        raise err(where, value, f'a mapping with exactly {names}')
-    if trigger == 'after_edges':
-        names = [b.name for b in cell.light_barriers]
-        if value['barrier'] not in names:
-            raise err(f'{where}.barrier', value['barrier'],
-                      f'a light barrier of the cell ({", ".join(names)})')
-        count = int(_number(err, f'{where}.count', value['count'], 1, True))
-        return ScenarioEntry(spec, trigger, index=names.index(value['barrier']), count=count,
-                             text=f'after {count} edges of {value["barrier"]}')
-    names = [z.name for z in cell.zones]
-    if value['zone'] not in names:
-        raise err(f'{where}.zone', value['zone'],
-                  f'a zone of the cell ({", ".join(names) or "none"})')
-    count = int(_number(err, f'{where}.count', value['count'], 0, True))
-    return ScenarioEntry(spec, trigger, index=names.index(value['zone']), count=count,
-                         text=f'more than {count} parts in zone {value["zone"]}')
+    # a trigger on the cell's state: (key of the element, what it is, its names, least count)
+    key, what, names, least = (
+        ('barrier', 'a light barrier', [b.name for b in cell.light_barriers], 1)
+        if trigger == 'after_edges' else ('zone', 'a zone', [z.name for z in cell.zones], 0))
+    if not isinstance(value, dict) or set(value) != {key, 'count'}:
+        raise err(where, value, f'a mapping with exactly {key} and count')
+    if value[key] not in names:
+        raise err(f'{where}.{key}', value[key],
+                  f'{what} of the cell ({", ".join(names) or "none"})')
+    count = int(_number(err, f'{where}.count', value['count'], least, True))
+    text = (f'after {count} edges of {value[key]}' if trigger == 'after_edges'
+            else f'more than {count} parts in zone {value[key]}')
+    return ScenarioEntry(spec, trigger, index=names.index(value[key]), count=count, text=text)
 
 
 class ScenarioRunner:

@@ -268,7 +268,18 @@ def test_vanished_parts_keep_the_multi_scale_ledger_exact():
                                                         'y1': 0.3}, duration=1.0))
     a.twin.faults.inject(FaultSpec('parts_vanish', '', {'x0': 3.8, 'y0': -0.3, 'x1': 3.9,
                                                         'y1': 0.3}))
-    a.step(4000)
+    a.step(3000)
+    density_before = a.coupling.vanished_macro
+    # inside the macro zone: density falls off as well
+    a.twin.faults.inject(FaultSpec('parts_vanish', '', {'x0': 2.0, 'y0': -0.3, 'x1': 2.4,
+                                                        'y1': 0.3}))
+    a.step(3000)
     ledger = a.coupling.ledger()
     assert ledger['vanished'] > 10 and abs(ledger['residual']) < 1e-9
+    assert abs(ledger['type_residual']) < 1e-9
     assert ledger['macro'] > 0  # the run really crossed the macro zone
+    assert density_before == 0.0 and a.coupling.vanished_macro > 1.0
+    grid = a.macro.grids[0]
+    xc, yc = grid.grid.centres()
+    inside = (xc >= 2.0) & (xc <= 2.4) & (yc >= -0.3) & (yc <= 0.3)
+    assert not grid.density[inside].any()
