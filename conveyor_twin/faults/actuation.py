@@ -45,7 +45,7 @@ class ActuationFaults:
         self._delayed: Dict[int, List[Command]] = {}  # step -> commands due then
         self._low = np.array([a.position_range[0] for a in cell.actuators], dtype=np.float64)
         self._high = np.array([a.position_range[1] for a in cell.actuators], dtype=np.float64)
-        self._nominal_dx = np.zeros(0)
+        self._rate = np.ones(len(cell.actuators))
         self.dropped = 0   # commands lost to faults
         self.delayed = 0   # commands delayed by faults
 
@@ -56,8 +56,6 @@ class ActuationFaults:
 
     def apply(self, events: Sequence[FaultEvent], actuation: Actuation) -> None:
         """Take the step's events (those of other stages are ignored)."""
-        if not self._nominal_dx.size and len(actuation._actuator_dx):
-            self._nominal_dx = actuation._actuator_dx.copy()
         for event in events:
             fault = event.fault
             if fault.kind not in _COMMAND_FAULTS and fault.kind not in _DRIVE_FAULTS:
@@ -68,14 +66,14 @@ class ActuationFaults:
             else:
                 self.faults[fault.id] = fault
                 self._rng[fault.id] = fault_rng(self.seed, fault.id)
-        if len(self._nominal_dx):  # actuator rate limits: nominal x the active factors
-            dx = self._nominal_dx.copy()
+        if events:  # actuator rate limits: the active factors
+            self._rate[:] = 1.0
             for fault in self.faults.values():
                 if fault.kind == 'actuator_stuck':
-                    dx[fault.index] = 0.0
+                    self._rate[fault.index] = 0.0
                 elif fault.kind == 'actuator_slow':
-                    dx[fault.index] *= fault.param('factor')
-            actuation._actuator_dx[:] = dx
+                    self._rate[fault.index] *= fault.param('factor')
+            actuation.set_actuator_rate_factors(self._rate)
 
     def filter_commands(self, commands: List[Command], step: int) -> List[Command]:
         """Return the commands that take effect at ``step``: the drained ones that no fault
