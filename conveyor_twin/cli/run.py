@@ -178,10 +178,7 @@ def run_split(args: argparse.Namespace) -> int:
     if scenario_file:
         from conveyor_twin.faults.scenario import load_scenario, ScenarioError
         try:
-            if load_scenario(scenario_file, cell).conditional:
-                print('invalid scenario: its triggers on the cell\'s state need the composed '
-                      'layout (no --split); the twin was not started', file=sys.stderr)
-                return 2
+            load_scenario(scenario_file, cell)
         except ScenarioError as exc:
             print(f'invalid scenario: {exc}; the twin was not started', file=sys.stderr)
             return 2

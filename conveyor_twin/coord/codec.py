@@ -178,6 +178,42 @@ def parse_spawn_reply(reply: bytes) -> np.ndarray:
     return np.frombuffer(reply[1:], '<u4')
 
 
+_MEASURES = b'\x00M'  # never the start of counters (JSON)
+
+
+def step_reply(counters: bytes, measures: bytes) -> bytes:
+    """Return the reply of a step: the counters (or nothing), preceded by the scenario
+    triggers' measures when the node takes them (:func:`encode_measures`)."""
+    if not measures:
+        return counters
+    return _MEASURES + _U32.pack(len(measures)) + measures + counters
+
+
+def split_step_reply(reply: bytes) -> Tuple[bytes, bytes]:
+    """Return (counters, measures) of a :func:`step_reply`."""
+    if reply[:2] != _MEASURES:
+        return reply, b''
+    n, = _U32.unpack_from(reply, 2)
+    return reply[6 + n:], reply[6:6 + n]
+
+
+def encode_measures(edge_count: np.ndarray, zone_parts: np.ndarray) -> bytes:
+    """Return what a scale node measures for a scenario's triggers after a step: the reported
+    edge count of every light barrier (micro node; none from the macro node) and its share of
+    the parts in every zone [parts] (micro: bodies, macro: density)."""
+    return b''.join((_U32.pack(len(edge_count)), np.asarray(edge_count, '<u4').tobytes(),
+                     _U32.pack(len(zone_parts)), np.asarray(zone_parts, '<f8').tobytes()))
+
+
+def decode_measures(data: bytes) -> Tuple[np.ndarray, np.ndarray]:
+    """Return (edge counts, zone parts) of :func:`encode_measures` bytes."""
+    n, = _U32.unpack_from(data, 0)
+    edges = np.frombuffer(data, '<u4', n, 4).astype(np.uint32)
+    m, = _U32.unpack_from(data, 4 + 4 * n)
+    zones = np.frombuffer(data, '<f8', m, 8 + 4 * n).astype(np.float64)
+    return edges, zones
+
+
 def encode_counters(counters: Dict[str, float]) -> bytes:
     """Return a stage's part-balance counters as the reply bytes of a step."""
     return json.dumps(counters, sort_keys=True).encode()

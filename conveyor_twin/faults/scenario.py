@@ -18,6 +18,9 @@ step 1). A trigger is checked after every step and its fault takes effect at the
 ``after_edges`` once the barrier has reported ``count`` edges since the start,
 ``zone_parts_above`` once more than ``count`` parts are in the zone (bodies with their centre
 in it plus the macro density's parts). Every entry fires once per run (again after a reset).
+Split over processes, the scale nodes measure the edge counts and zone parts after every step
+and send them with their step replies (only for a scenario with such triggers), so the
+triggers fire at the same step as composed.
 """
 
 from dataclasses import dataclass
@@ -203,8 +206,8 @@ class ScenarioRunner:
                  edge_count: Optional[Callable[[], np.ndarray]] = None,
                  zone_parts: Optional[Callable[[int], float]] = None) -> None:
         if scenario.conditional and (edge_count is None or zone_parts is None):
-            raise ValueError('this scenario has triggers, which need the stages in this '
-                             'process (the composed layout)')
+            raise ValueError('this scenario has triggers on the cell\'s state: give edge_count '
+                             'and zone_parts')
         self.scenario = scenario
         self.faults = faults
         self.edge_count = edge_count

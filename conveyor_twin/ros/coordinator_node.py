@@ -95,6 +95,9 @@ class CoordinatorNode(Node):
         create_service(self, contract.CLEAR_FAULT, self._on_clear_fault)
         twin.step_listeners.append(self._log_faults)
         self._remote_roles = tuple(remote_roles)
+        #: The scale nodes send measures for a scenario's triggers with every step reply.
+        self.measures_wanted = False
+        self._measures: Dict[int, bytes] = {}
         #: Called with (kind 'spawn' or 'reset', sim time before it [ns], the request) for every
         #: successful ``spawn_parts``/``reset`` call, under the twin's lock (the recorder).
         self.call_listeners: List[Callable[[str, int, Any], None]] = []
@@ -217,10 +220,25 @@ class CoordinatorNode(Node):
 
     def _step_remote(self, inp: StepInput, commands: List[Command]) -> None:
         replies = self._send_and_wait(codec.step_payload(inp), inp.step)
+        if self.measures_wanted:  # a scenario's triggers: the scale nodes' measures first
+            for role, reply in replies.items():
+                replies[role], self._measures[role] = codec.split_step_reply(reply)
         # the scale nodes send their counters on diagnostics steps only: keep the last ones
         self._replies_fresh = all(replies.get(r) for r in self._remote_roles)
         if self._replies_fresh:
             self._step_replies = replies
+
+    def measured_edge_count(self) -> np.ndarray:
+        """Every light barrier's reported edge count after the last step, as the micro node
+        measured it (split layout, a scenario with triggers)."""
+        return codec.decode_measures(self._measures[codec.MICRO_ROLE])[0]
+
+    def measured_zone_parts(self, index: int) -> float:
+        """The parts in zone ``index`` after the last step: the micro node's bodies plus the
+        macro node's density [parts] (split layout, a scenario with triggers)."""
+        micro = codec.decode_measures(self._measures[codec.MICRO_ROLE])[1]
+        macro = codec.decode_measures(self._measures[codec.MACRO_ROLE])[1]
+        return float(micro[index]) + float(macro[index])
 
     def last_replies(self) -> Dict[int, bytes]:
         """Return each split scale node's counters (reply bytes, by role) for the current state:

@@ -41,11 +41,12 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
     context, params, cell, seed = started
     max_steps = round(params.duration / cell.settings.step) if params.duration > 0 else None
     assembled = build_twin(cell, seed=seed, layout='coordinator')
+    scenario = None
     if params.scenario:
         from conveyor_twin.faults.scenario import load_scenario, ScenarioError
         try:
-            assembled.arm_scenario(load_scenario(params.scenario, cell))
-        except (ScenarioError, ValueError) as exc:
+            scenario = load_scenario(params.scenario, cell)
+        except ScenarioError as exc:
             print(f'scale_coordinator: scenario refused, the twin was not started: {exc}',
                   file=sys.stderr, flush=True)
             context.try_shutdown()
@@ -56,6 +57,10 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
                            remote_roles=assembled.remote_roles,
                            counters=lambda: _remote_counters(holder['node']))
     holder['node'] = node
+    if scenario is not None:  # triggers read what the scale nodes measure after each step
+        node.measures_wanted = scenario.conditional
+        assembled.arm_scenario(scenario, edge_count=node.measured_edge_count,
+                               zone_parts_of=node.measured_zone_parts)
     executor = make_executor(context)
     executor.add_node(node)
     coupling_executor = make_executor(context)

@@ -127,8 +127,7 @@ class LockstepTwin:
         twin starts
     :raises ValueError: on an unknown layout, an invalid ``foxglove`` address, or port 0 with
         the split layout
-    :raises conveyor_twin.faults.scenario.ScenarioError: on an invalid scenario file (or, split,
-        one with triggers on the cell's state)
+    :raises conveyor_twin.faults.scenario.ScenarioError: on an invalid scenario file
     :raises conveyor_twin.viz.foxglove_view.FoxgloveError: if the view cannot listen there
     :raises conveyor_twin.cell.CellError: on an invalid cell file
     """
@@ -152,12 +151,8 @@ class LockstepTwin:
         self.cell: Cell = cell if isinstance(cell, Cell) else load_cell(cell_file)
         self.scenario = None
         if scenario is not None:
-            from conveyor_twin.faults.scenario import load_scenario, ScenarioError
+            from conveyor_twin.faults.scenario import load_scenario
             self.scenario = load_scenario(os.fspath(scenario), self.cell)
-            if layout == 'split' and self.scenario.conditional:
-                raise ScenarioError(os.fspath(scenario), 'faults', 'a trigger on the '
-                                    "cell's state", 'step or time triggers only with the split '
-                                    'layout (the composed layout takes every trigger)')
         self.seed = seed
         self.layout = layout
         self.chunk = chunk

@@ -1,5 +1,5 @@
-"""Faults over ROS: the services, the latched stream, diagnostics, both layouts bit-identical,
-the CLI's checks, recording and re-simulation."""
+"""Faults over ROS: the services, the latched stream, diagnostics, both layouts bit-identical
+(timed and triggered faults), the CLI's checks, recording and re-simulation."""
 
 import subprocess
 import sys
@@ -24,6 +24,9 @@ faults:
   - {kind: source_surge, target: feeder, params: {factor: 2.0}, at: {step: 100}}
   - {kind: parts_vanish, params: {x0: 2.4, y0: -0.3, x1: 2.6, y1: 0.3}, at: {step: 900}}
   - {kind: stream_outage, target: belt_states, at: {step: 700}, duration: 0.05}
+  - {kind: belt_delay_commands, target: main, params: {delay: 0.1},
+     at: {after_edges: {barrier: lb_infeed, count: 1}}}
+  - {kind: barrier_stuck_free, target: lb_exit, at: {zone_parts_above: {zone: belt, count: 10}}}
 '''
 TOPICS = ('parts', 'light_barriers', 'light_barrier_edges', 'belt_states', 'actuator_states',
           'faults')
@@ -44,7 +47,7 @@ def test_a_scenario_gives_the_same_streams_composed_split_and_rerun(tmp_path):
     assert _run('split', str(path))[0] == composed
     assert belt_messages == 1500 - 50  # silenced for 50 steps
     injected = [i for s in states for i in s.injected]
-    assert len(injected) == 8 and states[-1].total_injected == 8
+    assert len(injected) == 10 and states[-1].total_injected == 10  # the triggers fired
 
 
 def test_services_the_latched_stream_and_diagnostics():
@@ -96,4 +99,4 @@ def test_run_refuses_an_invalid_scenario_and_records_a_valid_one(tmp_path):
     assert 'fault injected at step 300: belt_slip main [factor=0.6]' in out.stderr
     report = resimulate(str(recording))
     assert report.ok, report.difference
-    assert report.faults == 8 and report.compared['/faults'] > 0
+    assert report.faults == 10 and report.compared['/faults'] > 0
