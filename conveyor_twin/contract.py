@@ -43,6 +43,9 @@ CLOCK_QOS = OfferedQos(depth=1, reliability='best_effort')
 COMMAND_QOS = OfferedQos(depth=100)
 #: Diagnostics (1 Hz) and markers (viewer rate).
 SLOW_QOS = OfferedQos(depth=10)
+#: The active faults, sent on change: latched (transient local), so a late joiner gets the
+#: latest states (the last is the current set); deep enough that a burst of changes is not lost.
+LATCHED_QOS = OfferedQos(depth=100, durability='transient_local')
 
 
 class Kind(str, enum.Enum):
@@ -149,13 +152,19 @@ SPAWN_PARTS = Topic('spawn_parts', _SRVS + 'SpawnParts', _V, COMMAND_QOS, Rate.O
 COMMAND_STATUS = Topic('command_status', 'diagnostic_msgs/msg/DiagnosticStatus', _S,
                        COMMAND_QOS, Rate.ON_DEMAND, Stamp.NONE, _COORD, default=False)
 
+FAULTS = Topic('faults', _MSGS + 'FaultState', _S, LATCHED_QOS, Rate.EDGE, Stamp.HEADER, _COORD)
+INJECT_FAULT = Topic('inject_fault', _SRVS + 'InjectFault', _V, COMMAND_QOS, Rate.ON_DEMAND,
+                     Stamp.NONE, _COORD)
+CLEAR_FAULT = Topic('clear_fault', _SRVS + 'ClearFault', _V, COMMAND_QOS, Rate.ON_DEMAND,
+                    Stamp.NONE, _COORD)
+
 #: Every stream the twin emits.
 STREAMS: Tuple[Topic, ...] = (PARTS, DENSITY, LIGHT_BARRIERS, LIGHT_BARRIER_EDGES, BELT_STATES,
-                              ACTUATOR_STATES, CLOCK, DIAGNOSTICS, MARKERS)
+                              ACTUATOR_STATES, CLOCK, DIAGNOSTICS, MARKERS, FAULTS)
 #: Every command topic the twin subscribes to.
 COMMANDS: Tuple[Topic, ...] = (BELT_COMMAND, ACTUATOR_COMMAND)
 #: Every service the twin serves.
-SERVICES: Tuple[Topic, ...] = (STEP, RESET, SPAWN_PARTS)
+SERVICES: Tuple[Topic, ...] = (STEP, RESET, SPAWN_PARTS, INJECT_FAULT, CLEAR_FAULT)
 #: Answers to commands, published when a command arrives (not part of a step's frame).
 REPLIES: Tuple[Topic, ...] = (COMMAND_STATUS,)
 #: Topics (streams, commands and replies) by name, as written above.

@@ -28,9 +28,10 @@ INTERFACE = {
 def test_every_interface_entry_is_in_the_table_once():
     entries = contract.STREAMS + contract.COMMANDS + contract.SERVICES
     assert len({t.name for t in entries}) == len(entries)
-    # markers are the one stream beyond the design's list (viewer data, not recorded by default)
-    # and the answers to commands (command_status), also off the design's list
-    assert set(contract.CONTRACT) == set(INTERFACE) | {'markers', 'command_status'}
+    # beyond the design's list: markers (viewer data, not recorded by default), the answers to
+    # commands (command_status) and the faults interface (faults, inject_fault, clear_fault)
+    assert set(contract.CONTRACT) == set(INTERFACE) | {'markers', 'command_status', 'faults',
+                                                       'inject_fault', 'clear_fault'}
     for name, (short, kind) in INTERFACE.items():
         topic = contract.CONTRACT[name]
         assert topic.type_name.split('/')[-1] == short and topic.kind is kind, name

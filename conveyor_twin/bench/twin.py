@@ -26,6 +26,11 @@ window, so floor and twin windows interleave; the twin's overruns per minute are
 ratio to those of the floor windows beside it (1: the twin loses no deadline the machine would
 have kept; the floor's own overruns are time the kernel or the hypervisor took from any loop).
 
+``--foxglove``: every round runs the composed twin three times side by side: without a
+Foxglove view, with a view no client watches, and with a view and one client
+(:mod:`conveyor_twin.bench.foxglove_client`, another process) subscribed to every channel; it
+prints the step-time and stream figures of the three and their ratios to the first.
+
 Targets: 0 overruns beyond the floor, >= 999 Hz per stream, p99 <= 1.5 ms, no loss.
 """
 
@@ -263,8 +268,19 @@ def _signal_group(pid: int, sig: int) -> None:
         pass
 
 
-def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[str, object]:
+def _free_port() -> int:
+    import socket
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        return probe.getsockname()[1]
+
+
+def run_layout(split: bool, args: argparse.Namespace, directory: str,
+               foxglove: str = '') -> Dict[str, object]:
     """Run the twin in one layout and the subscriber process; return the figures.
+
+    :param foxglove: ``view``: the twin serves a Foxglove view nobody watches; ``client``: and
+        a client process reads every channel of it; empty: no view.
 
     ``steal_percent``: CPU time taken by the hypervisor for other guests during the run (on a
     virtual machine the twin cannot be scheduled then, whatever its priority).
@@ -278,6 +294,10 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
                 '--markers-rate', str(args.markers_rate)]
     if split:
         twin_cmd.append('--split')
+    client = None
+    if foxglove:
+        port = _free_port()
+        twin_cmd += ['--foxglove', f'127.0.0.1:{port}']
     twin_log = open(os.path.join(directory, 'twin.log'), 'w+')
     twin = subprocess.Popen(twin_cmd, env=env, stdout=subprocess.PIPE, stderr=twin_log,
                             text=True, start_new_session=True)
@@ -286,13 +306,28 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
          str(args.parts), '--duration', str(args.duration), '--settle', str(args.settle),
          '--belt-speed', str(args.belt_speed), '--reader', args.reader], env=env,
         stdout=subprocess.PIPE, text=True)
+    if foxglove == 'client':
+        client = subprocess.Popen([sys.executable, '-m', 'conveyor_twin.bench.foxglove_client',
+                                   str(port)], env=env, stdout=subprocess.PIPE, text=True)
     result: Optional[dict] = None
+    client_result: Optional[dict] = None
     try:
         for line in sub.stdout:
             if line.startswith(RESULT_PREFIX):
                 result = json.loads(line[len(RESULT_PREFIX):])
         sub.wait(60)
     finally:
+        if client is not None:
+            client.send_signal(signal.SIGINT)
+            try:
+                client_out, _ = client.communicate(timeout=30)
+            except subprocess.TimeoutExpired:
+                client.kill()
+                client_out, _ = client.communicate()
+            from conveyor_twin.bench.foxglove_client import RESULT_PREFIX as CLIENT_PREFIX
+            for line in client_out.splitlines():
+                if line.startswith(CLIENT_PREFIX):
+                    client_result = json.loads(line[len(CLIENT_PREFIX):])
         ended_early = twin.poll() is not None
         _signal_group(twin.pid, signal.SIGINT)
         try:
@@ -306,6 +341,10 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str) -> Dict[st
             summary = json.loads(line)
     figures: Dict[str, object] = {'layout': 'split' if split else 'composed',
                                   'steal_percent': steal_percent(cpu_before, cpu_times())}
+    if foxglove:
+        figures['foxglove'] = foxglove
+        if client is not None:
+            figures['foxglove_client'] = client_result
     twin_log.seek(0)
     log = twin_log.read()
     twin_log.close()
@@ -354,8 +393,25 @@ def compare_to_floor(figures: Dict[str, object], before: Optional[Dict[str, obje
     figures['overruns_vs_floor'] = round(twin_rate / floor_rate, 2) if floor_rate else None
 
 
+def foxglove_comparison(results: List[Dict[str, object]]) -> Dict[str, object]:
+    """Return the median step-time mean of each ``--foxglove`` variant and its ratio to the
+    runs without a view [ms, 1]."""
+    by_variant: Dict[str, List[float]] = {}
+    for figures in results:
+        mean = figures.get('step_time_mean_ms_median')
+        if mean is not None:
+            by_variant.setdefault(str(figures.get('foxglove') or 'none'), []).append(
+                float(mean))
+    medians = {variant: float(np.median(v)) for variant, v in by_variant.items()}
+    base = medians.get('none')
+    return {'step_time_mean_ms': medians,
+            'ratio_to_none': {variant: round(m / base, 3) for variant, m in medians.items()}
+            if base else {}}
+
+
 def _print(figures: Dict[str, object]) -> None:
-    print(f"{figures['layout']}: {figures.get('placed_parts')} parts placed, window "
+    variant = f" (Foxglove: {figures['foxglove']})" if figures.get('foxglove') else ''
+    print(f"{figures['layout']}{variant}: {figures.get('placed_parts')} parts placed, window "
           f"{figures.get('window_s')} s, micro parts in flight "
           f"{figures.get('micro_in_flight')}, CPU stolen by the hypervisor "
           f"{figures.get('steal_percent')} %; {figures.get('reader')} reader using "
@@ -384,6 +440,8 @@ def _print(figures: Dict[str, object]) -> None:
               f"per min; twin / floor "
               f"{ratio if ratio is not None else 'n/a (the floor saw no overrun)'}")
     print(f"  twin summary: {figures.get('twin_summary')}")
+    if 'foxglove_client' in figures:
+        print(f"  Foxglove client: {figures['foxglove_client']}")
     if 'twin_log_tail' in figures:
         print(f"  twin ended early: {figures['twin_ended_early']}; its log ends:\n"
               + figures['twin_log_tail'])
@@ -411,25 +469,37 @@ def main(argv: List[str]) -> int:
                    help='paced floor loop before the first and after every twin window [s] '
                         '(0: none)')
     p.add_argument('--rounds', type=int, default=1, help='twin windows per layout')
+    p.add_argument('--foxglove', action='store_true',
+                   help='composed twin without a Foxglove view, with a view and no client, '
+                        'and with one client reading every channel, side by side per round')
     p.add_argument('--json', action='store_true', help='print one JSON object')
     args = p.parse_args(argv)
-    layouts = {'composed': [False], 'split': [True], 'both': [False, True]}[args.layout]
+    layouts = {'composed': [(False, '')], 'split': [(True, '')],
+               'both': [(False, ''), (True, '')]}[args.layout]
+    if args.foxglove:
+        layouts = [(False, ''), (False, 'view'), (False, 'client')]
     results = []
     floor_window = {'seconds': args.floor_window}
     with tempfile.TemporaryDirectory() as directory:
         before = floor_figures(floor_window)
         for _ in range(max(1, args.rounds)):
-            for split in layouts:
-                figures = run_layout(split, args, directory)
+            for split, foxglove in layouts:
+                figures = run_layout(split, args, directory, foxglove)
                 after = floor_figures(floor_window)
                 compare_to_floor(figures, before, after)
                 before = after
                 results.append(figures)
                 if not args.json:
                     _print(figures)
+    comparison = foxglove_comparison(results) if args.foxglove else None
     if args.json:
         print(json.dumps({'parts': args.parts, 'duration_s': args.duration,
-                          'layouts': results}))
+                          'layouts': results, 'foxglove': comparison}))
+    elif comparison is not None:
+        means, ratios = comparison['step_time_mean_ms'], comparison['ratio_to_none']
+        print('Foxglove, side by side (median over rounds of the step-time mean): '
+              + ', '.join(f'{v} {means[v]:.4f} ms (ratio {ratios.get(v, "n/a")})'
+                          for v in ('none', 'view', 'client') if v in means))
     return 0
 
 

@@ -29,7 +29,8 @@ def build_parser() -> argparse.ArgumentParser:
 def format_report(r: dict) -> str:
     """Return a report (``ResimReport.as_dict()``) as text."""
     head = (f"resimulated {r['path']}: {r['steps']} steps, {r['commands']} recorded commands "
-            f"applied, {r['compared_total']} messages compared")
+            f"applied, {r.get('faults', 0)} recorded faults injected, "
+            f"{r['compared_total']} messages compared")
     lines = [head]
     for topic, n in sorted(r['compared'].items()):
         lines.append(f'  {topic}: {n} identical')

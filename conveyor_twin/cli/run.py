@@ -40,9 +40,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help='MarkerArray rate on `markers` [Hz]; 0 disables')
     p.add_argument('--foxglove', default=None, metavar='[HOST:]PORT',
                    help='serve a live Foxglove view (WebSocket) at HOST:PORT; host 127.0.0.1 '
-                   'by default, port 0 picks a free one (composed layout)')
+                   'by default, port 0 picks a free one')
     p.add_argument('--foxglove-rate', type=float, default=50.0,
-                   help='rate of the every-step streams sent to Foxglove clients [Hz]')
+                   help='rate of the every-step streams sent to Foxglove clients [Hz] '
+                   '(composed layout; split: 50)')
+    p.add_argument('--scenario', default='', metavar='FILE',
+                   help='fault scenario YAML: faults by step or time, or triggered by the '
+                   "cell's state (docs/faults.md); checked before the twin starts")
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
     p.add_argument('--quiet', action='store_true', help='no progress line')
     from conveyor_twin.ros.run_recording import add_arguments
@@ -93,12 +97,28 @@ def run_composed(args: argparse.Namespace) -> int:
         print(f'invalid cell: {exc}', file=sys.stderr)
         return 1
     seed = cell.settings.seed if args.seed is None else args.seed
+    scenario = None
+    if args.scenario:
+        from conveyor_twin.faults.scenario import load_scenario, ScenarioError
+        try:
+            scenario = load_scenario(args.scenario, cell)
+        except ScenarioError as exc:
+            print(f'invalid scenario: {exc}; the twin was not started', file=sys.stderr)
+            return 2
     mode = TimeMode(args.mode)
     max_steps = round(args.duration / cell.settings.step) if args.duration > 0 else None
     context = Context()
     rclpy.init(context=context, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    twin = ComposedTwin(cell, seed=seed, mode=mode, context=context, namespace=args.namespace,
-                        markers_rate=args.markers_rate, max_steps=max_steps)
+    from conveyor_twin.viz.foxglove_view import FoxgloveError
+    try:
+        twin = ComposedTwin(cell, seed=seed, mode=mode, context=context,
+                            namespace=args.namespace, markers_rate=args.markers_rate,
+                            max_steps=max_steps, foxglove=args.foxglove or '',
+                            foxglove_rate=args.foxglove_rate, scenario=scenario)
+    except FoxgloveError as exc:
+        print(f'conveyor-twin run: {exc}; the twin was not started', file=sys.stderr)
+        context.try_shutdown()
+        return 2
     from conveyor_twin.record.errors import RecordingError
     from conveyor_twin.ros.run_recording import format_recording, start_recording
     try:
@@ -108,22 +128,6 @@ def run_composed(args: argparse.Namespace) -> int:
         twin.stop()
         context.try_shutdown()
         return 2
-    view = None
-    if args.foxglove is not None:
-        from conveyor_twin.ros.foxglove_bridge import attach
-        from conveyor_twin.viz.foxglove_view import FoxgloveError
-        try:
-            view = attach(twin, args.foxglove, stream_rate=args.foxglove_rate)
-        except FoxgloveError as exc:
-            print(f'conveyor-twin run: {exc}; the twin was not started', file=sys.stderr)
-            if recording is not None:
-                recording.close()
-            twin.stop()
-            context.try_shutdown()
-            return 2
-        host = args.foxglove.rpartition(':')[0].strip('[]') or '127.0.0.1'
-        print(f'conveyor_twin: Foxglove view at ws://{host}:{view.port} (Foxglove: Open '
-              'connection, Foxglove WebSocket)', file=sys.stderr, flush=True)
     interrupted = []
     signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
     signal.signal(signal.SIGTERM, lambda *_: interrupted.append(True))
@@ -145,8 +149,6 @@ def run_composed(args: argparse.Namespace) -> int:
                       file=sys.stderr, flush=True)
     finally:
         twin.stop()
-        if view is not None:
-            view.stop()
         summary = twin.coordinator.summary()
         if recording is not None:
             summary['recording'] = recording.close()
@@ -168,12 +170,21 @@ def run_split(args: argparse.Namespace) -> int:
 
     cell_file = os.path.abspath(args.cell) if args.cell else ''
     try:
-        load_cell(cell_file or None)
+        cell = load_cell(cell_file or None)
     except CellError as exc:
         print(f'invalid cell: {exc}', file=sys.stderr)
         return 1
+    scenario_file = os.path.abspath(args.scenario) if args.scenario else ''
+    if scenario_file:
+        from conveyor_twin.faults.scenario import load_scenario, ScenarioError
+        try:
+            load_scenario(scenario_file, cell)
+        except ScenarioError as exc:
+            print(f'invalid scenario: {exc}; the twin was not started', file=sys.stderr)
+            return 2
     process_args = ros_args(cell_file, args.seed, args.mode, args.duration, args.namespace,
-                            args.markers_rate)
+                            args.markers_rate, foxglove=args.foxglove or '',
+                            scenario=scenario_file)
     env = dict(os.environ)
     modules = ['conveyor_twin.ros.micro_node', 'conveyor_twin.ros.macro_node']
     scales = [subprocess.Popen([sys.executable, '-m', m] + process_args, env=env)
@@ -221,10 +232,17 @@ def main(argv: List[str]) -> int:
     """Entry point of ``conveyor-twin run``."""
     args = build_parser().parse_args(argv)
     ros_environment()
-    if args.split and (args.record or args.command or args.foxglove is not None):
-        print('conveyor-twin run: --record, --command and --foxglove need the composed layout '
-              '(no --split)', file=sys.stderr)
+    if args.split and (args.record or args.command):
+        print('conveyor-twin run: --record and --command need the composed layout (no --split)',
+              file=sys.stderr)
         return 2
+    if args.foxglove is not None:
+        from conveyor_twin.viz.foxglove_view import FoxgloveError, parse_address
+        try:
+            parse_address(args.foxglove)
+        except FoxgloveError as exc:
+            print(f'conveyor-twin run: {exc}', file=sys.stderr)
+            return 2
     if args.split:
         return run_split(args)
     return run_composed(args)

@@ -21,8 +21,13 @@ class Actuation:
         self.actuator_target = np.array([a.initial_position for a in cell.actuators],
                                         dtype=np.float64)
         self.actuator_position = self.actuator_target.copy()
-        self._actuator_dx = np.array([a.max_speed * dt for a in cell.actuators],
-                                     dtype=np.float64)
+        self._nominal_dx = np.array([a.max_speed * dt for a in cell.actuators],
+                                    dtype=np.float64)
+        self._actuator_dx = self._nominal_dx.copy()
+
+    def set_actuator_rate_factors(self, factors: np.ndarray) -> None:
+        """Move every actuator at ``factors`` [1] x its max speed (1: nominal; 0: stuck)."""
+        np.multiply(self._nominal_dx, factors, out=self._actuator_dx)
 
     def set_belt_target(self, index: int, speed: float) -> None:
         """Set belt ``index``'s target speed [m/s] (already validated)."""

@@ -23,11 +23,12 @@ builds; tests and tools use it directly::
 """
 
 from dataclasses import dataclass
-from typing import Dict, Literal, Optional, Tuple
+from typing import Callable, Dict, Literal, Optional, Tuple
 
 import numpy as np
 
 from conveyor_twin.cell.model import Cell
+from conveyor_twin.coord import codec
 from conveyor_twin.coord.codec import MACRO_ROLE, MICRO_ROLE
 from conveyor_twin.coord.mirror import has_coupling, MacroSide, MicroSide
 from conveyor_twin.coord.requests import SpawnRequest
@@ -36,6 +37,7 @@ from conveyor_twin.coord.stages import MacroStage, MicroStage
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.twin import Twin
 from conveyor_twin.coord.zone_barriers import MacroZoneBarriers, RemoteBarriers
+from conveyor_twin.faults.scenario import Scenario, ScenarioRunner
 
 Layout = Literal['composed', 'coordinator', 'micro', 'macro']
 LAYOUTS: Tuple[str, ...] = ('composed', 'coordinator', 'micro', 'macro')
@@ -75,6 +77,49 @@ class AssembledTwin:
         if self.layout != 'composed':
             raise ValueError(f'only the composed layout steps by itself, not {self.layout!r}')
         return self.twin.step(n)
+
+    def arm_scenario(self, scenario: Scenario, *,
+                     edge_count: Optional[Callable[[], np.ndarray]] = None,
+                     zone_parts_of: Optional[Callable[[int], float]] = None) -> ScenarioRunner:
+        """Arm a fault scenario on the coordinator core (``composed`` and ``coordinator``);
+        re-armed after every reset. Its triggers read the stages here (``composed``) or what
+        the scale nodes measured (``coordinator``: ``edge_count``, ``zone_parts_of``, from
+        their step replies, see :meth:`trigger_measures`).
+
+        :raises ValueError: for a scenario with triggers and nothing to read them from.
+        """
+        twin = self.twin
+        if twin is None:
+            raise ValueError(f'the {self.layout} layout has no coordinator core')
+        micro, macro = self.micro, self.macro
+        if micro is not None:
+            edge_count = micro.barrier_edge_count
+
+            def zone_parts_of(index: int) -> float:
+                return zone_parts(self.cell, micro, macro, index)
+        runner = ScenarioRunner(scenario, twin.faults, edge_count=edge_count,
+                                zone_parts=zone_parts_of)
+        twin.fault_watchers.append(runner.watch)
+        twin.reset_listeners.append(runner.arm)
+        return runner
+
+    def trigger_measures(self) -> Callable[[], bytes]:
+        """Return what a split scale node sends after every step when the scenario has
+        triggers on the cell's state (``micro``: barrier edge counts and bodies per zone;
+        ``macro``: density parts per zone), :func:`~conveyor_twin.coord.codec.encode_measures`
+        bytes."""
+        cell, zones = self.cell, range(len(self.cell.zones))
+        if self.layout == 'micro':
+            micro = self.micro
+            return lambda: codec.encode_measures(
+                micro.barrier_edge_count(),
+                np.array([micro_zone_parts(cell, micro, i) for i in zones]))
+        if self.layout == 'macro':
+            macro = self.macro
+            return lambda: codec.encode_measures(
+                np.zeros(0, np.uint32), np.array([macro_zone_parts(cell, macro, i)
+                                                  for i in zones]))
+        raise ValueError(f'the {self.layout} layout is no scale node')
 
     def spawn(self, request: SpawnRequest) -> np.ndarray:
         """Place a checked spawn request's parts now (all or nothing); return their ids.
@@ -155,3 +200,24 @@ def build_twin(cell: Cell, *, seed: int, layout: Layout = 'composed',
                              macro_side=side)
     allowed = ', '.join(LAYOUTS)
     raise ValueError(f'unknown layout {layout!r} (allowed: {allowed})')
+
+
+def zone_parts(cell: Cell, micro: MicroStage, macro: Optional[MacroStage], index: int) -> float:
+    """Return the parts in zone ``index``: bodies with their centre in it, plus the parts of
+    its macro density (if it has a grid) [parts]."""
+    return micro_zone_parts(cell, micro, index) + macro_zone_parts(cell, macro, index)
+
+
+def micro_zone_parts(cell: Cell, micro: MicroStage, index: int) -> float:
+    """Return the bodies with their centre in zone ``index`` [parts]."""
+    x0, y0, x1, y1 = cell.zones[index].region
+    v = micro.sim.parts_view()
+    return float(np.count_nonzero((v.x >= x0) & (v.x <= x1) & (v.y >= y0) & (v.y <= y1)))
+
+
+def macro_zone_parts(cell: Cell, macro: Optional[MacroStage], index: int) -> float:
+    """Return the parts of zone ``index``'s macro density (0 without a grid) [parts]."""
+    if macro is None:
+        return 0.0
+    name = cell.zones[index].name
+    return sum(g.total_parts() for g in macro.grids if g.zone.name == name)

@@ -6,7 +6,8 @@ Split over processes, the coordinator and the two scale nodes talk over hidden t
 
 Coordinator -> scale nodes (first byte: the kind):
 
-- ``S`` step: :func:`step_payload` (step, time [ns], belt speeds, actuator positions, as
+- ``S`` step: :func:`step_payload` (step, time [ns], belt speeds, actuator positions, then the
+  step's fault events as uint32 length + UTF-8 JSON, length 0 on the usual step without any, as
   :func:`pack_step_input`);
 - ``R`` reset: :func:`reset_payload` (uint64 seed, cell file as UTF-8, empty: the current cell);
 - ``P`` spawn: :func:`spawn_payload` (uint16 part type index, then x, y, yaw as float64 rows);
@@ -35,6 +36,7 @@ from typing import Dict, List, Sequence, Tuple
 import numpy as np
 
 from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.faults.book import FaultEvent
 from conveyor_twin.micro.sim import MicroSim
 from conveyor_twin.micro.state import C_ENTERED, C_N, C_NEXT_ID, P_ROWS
 
@@ -102,18 +104,29 @@ def parse_stamped(payload: bytes) -> Tuple[int, memoryview]:
 # --- coordinator -> scale nodes ---
 def pack_step_input(inp: StepInput) -> bytes:
     """Return the byte form of a step input."""
+    faults = (json.dumps([e.as_dict() for e in inp.faults]).encode('utf-8') if inp.faults
+              else b'')
     return b''.join((_STEP_HEADER.pack(inp.step, inp.time_ns, inp.belt_speed.size,
                                        inp.actuator_position.size),
                      inp.belt_speed.astype('<f8').tobytes(),
-                     inp.actuator_position.astype('<f8').tobytes()))
+                     inp.actuator_position.astype('<f8').tobytes(),
+                     _U32.pack(len(faults)), faults))
 
 
 def unpack_step_input(data: bytes) -> StepInput:
     """Rebuild a :class:`StepInput` from :func:`pack_step_input` bytes (the same float64s)."""
     step, time_ns, nb, na = _STEP_HEADER.unpack_from(data, 0)
-    belts = np.frombuffer(data, '<f8', nb, _STEP_HEADER.size).astype(np.float64)
-    actuators = np.frombuffer(data, '<f8', na, _STEP_HEADER.size + 8 * nb).astype(np.float64)
-    return StepInput(step, time_ns, belts, actuators)
+    off = _STEP_HEADER.size
+    belts = np.frombuffer(data, '<f8', nb, off).astype(np.float64)
+    actuators = np.frombuffer(data, '<f8', na, off + 8 * nb).astype(np.float64)
+    off += 8 * (nb + na)
+    faults: tuple = ()
+    if len(data) >= off + _U32.size:
+        length, = _U32.unpack_from(data, off)
+        if length:
+            text = bytes(data[off + _U32.size:off + _U32.size + length]).decode('utf-8')
+            faults = tuple(FaultEvent.from_dict(e) for e in json.loads(text))
+    return StepInput(step, time_ns, belts, actuators, faults)
 
 
 def step_payload(inp: StepInput) -> bytes:
@@ -163,6 +176,42 @@ def parse_spawn_reply(reply: bytes) -> np.ndarray:
     if reply[:1] == b'E':
         raise ValueError(bytes(reply[1:]).decode())
     return np.frombuffer(reply[1:], '<u4')
+
+
+_MEASURES = b'\x00M'  # never the start of counters (JSON)
+
+
+def step_reply(counters: bytes, measures: bytes) -> bytes:
+    """Return the reply of a step: the counters (or nothing), preceded by the scenario
+    triggers' measures when the node takes them (:func:`encode_measures`)."""
+    if not measures:
+        return counters
+    return _MEASURES + _U32.pack(len(measures)) + measures + counters
+
+
+def split_step_reply(reply: bytes) -> Tuple[bytes, bytes]:
+    """Return (counters, measures) of a :func:`step_reply`."""
+    if reply[:2] != _MEASURES:
+        return reply, b''
+    n, = _U32.unpack_from(reply, 2)
+    return reply[6 + n:], reply[6:6 + n]
+
+
+def encode_measures(edge_count: np.ndarray, zone_parts: np.ndarray) -> bytes:
+    """Return what a scale node measures for a scenario's triggers after a step: the reported
+    edge count of every light barrier (micro node; none from the macro node) and its share of
+    the parts in every zone [parts] (micro: bodies, macro: density)."""
+    return b''.join((_U32.pack(len(edge_count)), np.asarray(edge_count, '<u4').tobytes(),
+                     _U32.pack(len(zone_parts)), np.asarray(zone_parts, '<f8').tobytes()))
+
+
+def decode_measures(data: bytes) -> Tuple[np.ndarray, np.ndarray]:
+    """Return (edge counts, zone parts) of :func:`encode_measures` bytes."""
+    n, = _U32.unpack_from(data, 0)
+    edges = np.frombuffer(data, '<u4', n, 4).astype(np.uint32)
+    m, = _U32.unpack_from(data, 4 + 4 * n)
+    zones = np.frombuffer(data, '<f8', m, 8 + 4 * n).astype(np.float64)
+    return edges, zones
 
 
 def encode_counters(counters: Dict[str, float]) -> bytes:

@@ -140,6 +140,10 @@ class _Region:
         self.fstate = np.zeros(3, dtype=np.int64)
         self.sink_popped = 0  # whole parts of the sink outflow given a type
         self.left = 0.0  # mass that left through sinks in this grid [parts]
+        # fault ``parts_vanish``: fault id -> flat indices of the cells whose mass falls off
+        self.vanish: Dict[int, np.ndarray] = {}
+        self.vanished = 0.0  # mass that fell off in this grid [parts]
+        self.vanish_popped = 0  # whole parts of it given a type
         # arrival phases of the release windows (see handover.release_windows)
         self.rng = np.zeros(2)
         self.face_thr = [np.zeros(a.shape) for a in self.face_acc]
@@ -161,6 +165,12 @@ class _Region:
         self.sink_index = np.flatnonzero(self.sink_cells).astype(np.int64)
         self.sides = [(0, ny), (ny, 2 * ny), (2 * ny, 2 * ny + nx), (2 * ny + nx, 2 * (ny + nx))]
         self.side_array = np.array(self.sides, dtype=np.int64)
+
+    def cells_in(self, x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
+        """Return the flat indices (ascending) of the cells whose centre lies in a rectangle."""
+        xc, yc = self.sim.grid.centres()
+        inside = (xc >= x0) & (xc <= x1) & (yc >= y0) & (yc <= y1)
+        return np.flatnonzero(inside).astype(np.int64)
 
     def seed_phases(self, spread: float, state: int) -> None:
         """Draw every window's first arrival phase (``spread * u`` [parts], ``u`` uniform
@@ -273,6 +283,7 @@ class ScaleCoupling:
         self.released_by_type = np.zeros(self.n_types, dtype=np.int64)
         self.left_by_type = np.zeros(self.n_types, dtype=np.int64)
         self.left_macro = 0.0
+        self.vanished_macro = 0.0  # mass of macro grids that fell off (fault parts_vanish)
         self.released = 0
         self.captured = 0
         self.step_index = 0
@@ -319,10 +330,14 @@ class ScaleCoupling:
         self.step_index = inp.step
         if not self.regions:
             return
+        if inp.faults:
+            self._vanish_faults(inp)
         self._tries = MAX_FAILED_PLACEMENTS
         for region in self.regions:
             self._capture(region)
             self._sinks(region)
+            if region.vanish:
+                self._vanish(region)
             self._accumulate(region)
             self._release(region)
             if region.tiles is not None and inp.step % CHECK_STEPS == 0:
@@ -330,6 +345,34 @@ class ScaleCoupling:
         self.zone_barriers.advance(self.cell.settings.step, inp.time_ns * 1e-9)
         if self.check:
             self.check_balance()
+
+    def _vanish_faults(self, inp: StepInput) -> None:
+        """Take the step's ``parts_vanish`` events: the cells of each grid in the rectangle."""
+        for event in inp.faults:
+            fault = event.fault
+            if fault.kind != 'parts_vanish':
+                continue
+            for region in self.regions:
+                if event.action == 'clear':
+                    region.vanish.pop(fault.id, None)
+                    continue
+                p = dict(fault.params)
+                cells = region.cells_in(p['x0'], p['y0'], p['x1'], p['y1'])
+                if len(cells):
+                    region.vanish[fault.id] = cells
+
+    def _vanish(self, region: _Region) -> None:
+        """Remove the mass in vanishing cells; count it ``vanished``, give whole parts types."""
+        sim = region.sim
+        for cells in region.vanish.values():
+            taken = _ho.take_cells(sim.density, cells, sim.grid.h)
+            if taken:
+                region.vanished += taken
+                self.vanished_macro += taken
+                whole = int(math.floor(region.vanished)) - region.vanish_popped
+                if whole > 0:
+                    region.pop_types(whole)
+                    region.vanish_popped += whole
 
     def _capture(self, region: _Region) -> None:
         sim, g = region.sim, region.sim.grid
@@ -477,7 +520,8 @@ class ScaleCoupling:
         """Return the part balance [parts]: entered, micro, macro, pending, left, residual.
 
         ``entered`` counts parts from sources, spawn requests and macro inflow; parts released
-        by the hand-over are not new. ``residual = entered - micro - macro - pending - left``.
+        by the hand-over are not new. ``residual = entered - micro - macro - pending - left -
+        vanished`` (``vanished``: parts that fell off the line, fault ``parts_vanish``).
         """
         c = self.micro.counters()
         micro_entered = c['entered'] - self.released
@@ -488,9 +532,12 @@ class ScaleCoupling:
         pending = sum(r.pending() for r in self.regions)
         left = float(c['left']) + self.left_macro
         micro_n = float(c['in_flight'])
-        residual = entered - micro_n - macro - pending - left - float(c['handed_over'])
+        vanished = float(c.get('vanished', 0)) + self.vanished_macro
+        residual = (entered - micro_n - macro - pending - left - float(c['handed_over'])
+                    - vanished)
         out = {'entered': entered, 'micro': micro_n, 'macro': macro, 'pending': pending,
-               'left': left, 'residual': residual, 'captured': float(self.captured),
+               'left': left, 'vanished': vanished, 'residual': residual,
+               'captured': float(self.captured),
                'released': float(self.released)}
         # per part type: whole parts held by the macro scale (deposited, not yet released or
         # sunk) and the type ledger's residual (typed entries vs mass, see check_balance)
@@ -519,6 +566,7 @@ class ScaleCoupling:
         for reg in self.regions:
             r -= reg.sim.total_parts() + sum(float(a.sum()) for a in reg.face_acc)
             r -= reg.left - reg.sink_popped
+            r -= reg.vanished - reg.vanish_popped
             r += reg.sim.parts_in - float(reg.fstate[2])
         return r
 
@@ -537,14 +585,16 @@ class ScaleCoupling:
 
     def state_bytes(self) -> bytes:
         """Return the coupling's dynamic state (accumulators, masks, counters) as bytes."""
-        parts = [np.array([self.left_macro, self.released, self.captured]).tobytes(),
+        parts = [np.array([self.left_macro, self.released, self.captured,
+                           self.vanished_macro]).tobytes(),
                  self.captured_by_type.tobytes(), self.released_by_type.tobytes(),
                  self.left_by_type.tobytes()]
         for r in self.regions:
             parts += [r.active.tobytes(), r.rot.tobytes(), r.fstate.tobytes(),
                       r.types_held(self.n_types).tobytes(), r.rng.tobytes(),
                       r.thr.tobytes(),
-                      np.array([r.left, r.sink_popped]).tobytes()]
+                      np.array([r.left, r.sink_popped, r.vanished,
+                                r.vanish_popped]).tobytes()]
             parts += [a.tobytes() for a in r.face_acc]
             if r.tiles is not None:
                 parts += [r.tiles.macro.tobytes(), r.tiles.last_switch.tobytes()]

@@ -20,6 +20,8 @@ from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.clock import step_ns
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.zone_barriers import BarrierOverlay
+from conveyor_twin.faults.barriers import BarrierFaults
+from conveyor_twin.faults.material import MaterialFaults
 from conveyor_twin.macro.solver import MacroSim
 from conveyor_twin.micro.errors import SpawnOverlapError
 from conveyor_twin.micro.sim import MicroSim
@@ -47,11 +49,26 @@ class MicroStage:
         self.sim = MicroSim(cell, seed=seed)
         self._dt_ns = step_ns(cell.settings.step)
         self._edges = _EMPTY_EDGES
+        #: Light-barrier and material faults (their events arrive with the step input).
+        self.barrier_faults = BarrierFaults(cell, seed)
+        self.material_faults = MaterialFaults()
+        self._step = 0
+        self._time_ns = 0
+        self._reported_step = -1
+        self._reported = None
 
     def advance(self, inp: StepInput) -> None:
-        """Apply the step's actuation, advance one step, collect its barrier edges."""
+        """Apply the step's faults and actuation, advance one step, collect its barrier
+        edges."""
+        if inp.faults:
+            self.barrier_faults.apply(inp.faults, self._true_blocked())
+            self.material_faults.apply(inp.faults, self.sim)
         self.sim.apply_actuation(inp.belt_speed, inp.actuator_position)
         self.sim.step(1)
+        if self.material_faults.busy:
+            self.material_faults.after_step(self.sim)
+        self._step = inp.step
+        self._time_ns = inp.time_ns
         if self.sim.event_count:
             ev = self.sim.drain_events()
             time_ns = np.rint(ev.time * 1e9).astype(np.int64)
@@ -77,18 +94,48 @@ class MicroStage:
         return out
 
     def barrier_blocked(self) -> np.ndarray:
-        """Blocked flag of every light barrier at the end of the step."""
-        return self._with_macro_barriers(self.sim.blocked, 'blocked')
+        """Blocked flag of every light barrier at the end of the step, as reported (faults
+        applied)."""
+        if self._faults_apply():
+            return self._faulted()[0]
+        return self._true_blocked()
 
     def barrier_edge_count(self) -> np.ndarray:
-        """Edges seen so far by every light barrier (uint32)."""
-        return self._with_macro_barriers(self.sim.edge_count, 'edge_count')
+        """Edges reported so far by every light barrier (uint32)."""
+        if self._faults_apply():
+            return self._faulted()[1]
+        return self.barrier_faults.count(self._true_edge_count())
 
     def edges(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Return the last step's edges: (barrier index, blocked, time [ns], part id).
+        """Return the last step's reported edges: (barrier index, blocked, time [ns], part id).
 
-        Edges of barriers in macro zones come last, with part id 0.
+        Edges of barriers in macro zones come after the micro ones, with part id 0; edges made
+        by faults last, with part id 0.
         """
+        if self._faults_apply():
+            return self._faulted()[2]
+        return self._true_edges()
+
+    def _faults_apply(self) -> bool:
+        """True if this step's barrier values go through the faults (decided once a step)."""
+        return self._reported_step == self._step or self.barrier_faults.busy
+
+    def _faulted(self) -> tuple:
+        """The step's (blocked, edge count, edges) through the barrier faults, once a step."""
+        if self._reported_step != self._step:
+            self._reported = self.barrier_faults.filter(
+                self._step, self._time_ns, self._true_blocked(), self._true_edge_count(),
+                self._true_edges())
+            self._reported_step = self._step
+        return self._reported
+
+    def _true_blocked(self) -> np.ndarray:
+        return self._with_macro_barriers(self.sim.blocked, 'blocked')
+
+    def _true_edge_count(self) -> np.ndarray:
+        return self._with_macro_barriers(self.sim.edge_count, 'edge_count')
+
+    def _true_edges(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         c = self.macro_barriers
         if c is None or not c.barriers:
             return self._edges
@@ -116,9 +163,13 @@ class MicroStage:
             raise ValueError(f'nothing placed: {exc}') from None
 
     def counters(self) -> Dict[str, int]:
-        """Part balance: entered, left (through sinks), in flight."""
+        """Part balance: entered, left (through sinks), in flight, and vanished (fault
+        ``parts_vanish``) once a part fell off."""
         c = self.sim.counters()
-        return {'entered': c['entered'], 'left': c['left'], 'in_flight': c['in_flight']}
+        out = {'entered': c['entered'], 'left': c['left'], 'in_flight': c['in_flight']}
+        if c['vanished']:
+            out['vanished'] = c['vanished']
+        return out
 
 
 class MacroStage:

@@ -7,8 +7,11 @@ float64 values, which is what keeps the two layouts bit-identical.
 """
 
 from dataclasses import dataclass
+from typing import Tuple
 
 import numpy as np
+
+from conveyor_twin.faults.book import FaultEvent
 
 
 @dataclass
@@ -18,9 +21,11 @@ class StepInput:
     :param belt_speed: actual speed of every belt during the step [m/s].
     :param actuator_position: actual position of every actuator at the end of the step
         [m or rad].
+    :param faults: faults injected or cleared at this step (usually none), in order.
     """
 
     step: int
     time_ns: int
     belt_speed: np.ndarray
     actuator_position: np.ndarray
+    faults: Tuple[FaultEvent, ...] = ()

@@ -2,10 +2,14 @@
 
 Each step ``k`` (the state after it is stamped ``k * dt``):
 1. the commands that arrived since step ``k - 1`` are drained, stamped ``k`` and applied to the
-   belt and actuator targets (:class:`~conveyor_twin.coord.commands.CommandBook`);
-2. belt speeds and actuator positions move one step toward their targets;
-3. one :class:`~conveyor_twin.coord.step_input.StepInput` is built and every local stage
-   advances with it (remote stages get its bytes; see ``conveyor_twin.ros``).
+   belt and actuator targets (:class:`~conveyor_twin.coord.commands.CommandBook`); faults
+   due at ``k`` are taken from the :class:`~conveyor_twin.faults.book.FaultBook`, and the
+   command and drive faults filter the commands (:mod:`conveyor_twin.faults.actuation`);
+2. belt speeds and actuator positions move one step toward their targets (drive faults
+   applied);
+3. one :class:`~conveyor_twin.coord.step_input.StepInput` is built, with the step's fault
+   events, and every local stage advances with it (remote stages get its bytes; see
+   ``conveyor_twin.ros``).
 """
 
 import threading
@@ -16,6 +20,8 @@ from conveyor_twin.coord.actuation import Actuation
 from conveyor_twin.coord.clock import step_ns
 from conveyor_twin.coord.commands import ACTUATOR, BELT, Command, CommandBook
 from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.faults.actuation import ActuationFaults
+from conveyor_twin.faults.book import FaultBook
 
 
 class Stage(Protocol):
@@ -44,6 +50,13 @@ class Twin:
         self.step_listeners: List[Callable[[StepInput, List[Command]], None]] = []
         self._last_commands: List[Command] = []
         self.commands = CommandBook(cell)
+        #: Fault requests and the active faults (:mod:`conveyor_twin.faults`).
+        self.faults = FaultBook(cell)
+        #: Called after every step (after the listeners) with the step's input: scenario
+        #: triggers that inject faults for the next step.
+        self.fault_watchers: List[Callable[[StepInput], None]] = []
+        #: Called after every reset (a scenario arms itself again).
+        self.reset_listeners: List[Callable[[], None]] = []
         self._load(cell, seed)
 
     def _load(self, cell: Cell, seed: int) -> None:
@@ -52,6 +65,8 @@ class Twin:
         self.dt_ns = step_ns(cell.settings.step)
         self.commands.clear()
         self.actuation = Actuation(cell)
+        self.faults.load(cell)
+        self.fault_actuation = ActuationFaults(cell, seed)
         self.step_index = 0
 
     def rebind(self, cell: Cell) -> None:
@@ -76,6 +91,8 @@ class Twin:
             self._load(cell, seed)
             for stage in self.stages:
                 stage.reset(cell, seed)
+            for listener in self.reset_listeners:
+                listener()
 
     def _apply(self, commands: List[Command]) -> None:
         for command in commands:
@@ -88,10 +105,19 @@ class Twin:
         """Drain and apply commands, move the actuation, and return the next step's input."""
         step = self.step_index + 1
         commands = self.commands.drain(step)
-        self._apply(commands)
-        self.actuation.advance()
-        inp = StepInput(step, step * self.dt_ns, self.actuation.belt_speed.copy(),
-                        self.actuation.actuator_position.copy())
+        events = self.faults.take(step)
+        faults = self.fault_actuation
+        if events or faults.busy:  # commands as received are recorded; faults act on them
+            faults.apply(events, self.actuation)
+            self._apply(faults.filter_commands(commands, step))
+            self.actuation.advance()
+            belt, position = faults.drive(self.actuation)
+        else:
+            self._apply(commands)
+            self.actuation.advance()
+            belt = self.actuation.belt_speed.copy()
+            position = self.actuation.actuator_position.copy()
+        inp = StepInput(step, step * self.dt_ns, belt, position, events)
         self._last_commands = commands
         return inp
 
@@ -106,4 +132,6 @@ class Twin:
                 self.step_index = inp.step
                 for listener in self.step_listeners:
                     listener(inp, self._last_commands)
+                for watcher in self.fault_watchers:
+                    watcher(inp)
         return inp

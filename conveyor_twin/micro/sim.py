@@ -42,8 +42,8 @@ from conveyor_twin.micro.sources import place, seed_streams, source_table, SS_CO
 from conveyor_twin.micro.state import (C_CONTACTS_FULL, C_ENTERED, C_EVENTS,
                                        C_EVENTS_DROPPED, C_N, C_NEXT_ID, C_OUTBOX,
                                        C_REGION_LEFT, C_REMOVED, C_STEP, C_SUBSTEPS,
-                                       C_SUBSTEPS_CAPPED, part_table, PartState, PartsView,
-                                       PT_BRAD)
+                                       C_SUBSTEPS_CAPPED, C_VANISHED, part_table, PartState,
+                                       PartsView, PT_BRAD)
 
 # Events buffer entries; edges beyond it between two drains are counted as dropped.
 EVENT_CAPACITY = 4096
@@ -409,6 +409,15 @@ class MicroSim:
         s.counters[C_REMOVED] += k
         return PartsView(out_id, out_type, *out_P)
 
+    def vanish(self, mask: np.ndarray) -> int:
+        """Remove the parts of a bool mask over the active parts as fallen off the line
+        (counted in ``vanished``, not ``removed``); return how many."""
+        view = self.remove(mask=mask)
+        k = len(view.id)
+        self.state.counters[C_REMOVED] -= k
+        self.state.counters[C_VANISHED] += k
+        return k
+
     def drain_outbox(self) -> PartsView:
         """Return copies of the parts that left the region since the last drain; empty it."""
         m = int(self.state.counters[C_OUTBOX])
@@ -434,11 +443,13 @@ class MicroSim:
         return self.n
 
     def counters(self) -> Dict[str, int]:
-        """Return the part balance: entered = in_flight + left + handed_over + removed."""
+        """Return the part balance: entered = in_flight + left + handed_over + removed +
+        vanished."""
         c = self.state.counters
         return {'entered': int(c[C_ENTERED]), 'left': int(self.sink_count.sum()),
                 'in_flight': self.n, 'handed_over': int(c[C_REGION_LEFT]),
-                'removed': int(c[C_REMOVED]), 'substeps': int(c[C_SUBSTEPS]),
+                'removed': int(c[C_REMOVED]), 'vanished': int(c[C_VANISHED]),
+                'substeps': int(c[C_SUBSTEPS]),
                 'substeps_capped': int(c[C_SUBSTEPS_CAPPED]),
                 'events_dropped': int(c[C_EVENTS_DROPPED]),
                 'contacts_full': int(c[C_CONTACTS_FULL])}

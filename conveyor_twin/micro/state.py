@@ -46,7 +46,8 @@ C_SUBSTEPS_CAPPED = 8  # steps whose substep count hit the cap
 C_REGION_LEFT = 9     # parts moved to the outbox so far
 C_REMOVED = 10        # parts removed through remove()
 C_CONTACTS_FULL = 11  # substeps whose contact buffer was full (contacts dropped)
-C_COUNTERS = 12
+C_VANISHED = 12       # parts that fell off the line (fault ``parts_vanish``)
+C_COUNTERS = 13
 
 
 def spin_arm(part_type: PartType) -> float:

@@ -21,7 +21,8 @@ from conveyor_twin.contract import Topic
 #: The streams of a frame in the order :meth:`Frame.messages` yields them.
 FRAME_STREAMS: Tuple[Topic, ...] = (
     contract.CLOCK, contract.BELT_STATES, contract.ACTUATOR_STATES, contract.DIAGNOSTICS,
-    contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES, contract.DENSITY)
+    contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES, contract.DENSITY,
+    contract.FAULTS)
 
 
 class Frame:
@@ -41,10 +42,12 @@ class Frame:
     :ivar light_barriers: ``LightBarrierStates`` CDR (micro).
     :ivar edges: ``(stamp [ns], LightBarrierEdge CDR)`` of every edge of the step (micro).
     :ivar density: one ``DensityGrid`` CDR per macro zone, in the cell's zone order (macro).
+    :ivar faults: ``FaultState`` CDR on the first step and whenever the active faults change,
+        else None (coordinator).
     """
 
     __slots__ = ('step', 'time_ns', 'input', 'commands', 'clock', 'belt_states', 'actuator_states',
-                 'diagnostics', 'parts', 'light_barriers', 'edges', 'density')
+                 'diagnostics', 'parts', 'light_barriers', 'edges', 'density', 'faults')
 
     def __init__(self) -> None:
         self.step = 0
@@ -59,6 +62,7 @@ class Frame:
         self.light_barriers: Optional[bytes] = None
         self.edges: Sequence[Tuple[int, bytes]] = ()
         self.density: List[bytes] = []
+        self.faults: Optional[bytes] = None
 
     def messages(self) -> Iterator[Tuple[Topic, int, bytes]]:
         """Yield (contract topic, stamp [ns], CDR bytes) of every message of the frame, in the
@@ -76,6 +80,8 @@ class Frame:
             yield contract.LIGHT_BARRIER_EDGES, stamp, data
         for data in self.density:
             yield contract.DENSITY, t, data
+        if self.faults is not None:
+            yield contract.FAULTS, t, self.faults
 
     def copy(self) -> 'Frame':
         """Return a frame with the same bytes that the next step does not overwrite."""

@@ -9,12 +9,19 @@ re-simulation, a viewer or a test harness; none of them is known to the cores.
 """
 
 import threading
-from typing import Any, Callable, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 
 from conveyor_twin.contract import Topic
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.output.frame import Frame, FrameSink
 from conveyor_twin.output.producers import FrameProducer
+
+
+#: Frame attribute of every stream a ``stream_outage`` may silence, and its value when silent.
+_OUTAGE = {'parts': ('parts', None), 'density': ('density', ()),
+           'light_barriers': ('light_barriers', None), 'light_barrier_edges': ('edges', ()),
+           'belt_states': ('belt_states', None), 'actuator_states': ('actuator_states', None),
+           '/clock': ('clock', None), 'diagnostics': ('diagnostics', None)}
 
 
 class TwinOutput:
@@ -31,6 +38,19 @@ class TwinOutput:
         self._sinks: Tuple[Any, ...] = ()
         self._on_frame: Tuple[Callable[[Frame], None], ...] = ()
         self._on_message: Tuple[Callable[[Topic, int, bytes], None], ...] = ()
+        #: Streams silenced by ``stream_outage`` faults: fault id -> (frame attribute, empty).
+        self.outages: Dict[int, Tuple[str, Any]] = {}
+
+    def _outages(self, inp: StepInput) -> None:
+        """Take the step's ``stream_outage`` events."""
+        for event in inp.faults:
+            fault = event.fault
+            if fault.kind != 'stream_outage':
+                continue
+            if event.action == 'clear':
+                self.outages.pop(fault.id, None)
+            else:
+                self.outages[fault.id] = _OUTAGE[fault.target]
 
     def subscribe(self, sink: FrameSink) -> None:
         """Hand every following frame to ``sink.on_frame`` (and off-step messages to its
@@ -67,6 +87,13 @@ class TwinOutput:
         frame.input = inp
         for producer in self.producers:
             producer.fill(frame, inp, commands)
+        if inp.step == 1 and self.outages:  # a reset ends every fault
+            self.outages = {}
+        if inp.faults:
+            self._outages(inp)
+        if self.outages:
+            for attribute, empty in self.outages.values():
+                setattr(frame, attribute, empty)
         for on_frame in self._on_frame:
             on_frame(frame)
         return frame

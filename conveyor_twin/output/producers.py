@@ -15,6 +15,7 @@ from conveyor_twin.contract import DIAGNOSTICS_PERIOD_STEPS
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.output.frame import Frame
 from conveyor_twin.wire import cdr
+from conveyor_twin.wire.fault_state import encode_fault_state, FaultEntry
 
 #: Returns the ``DiagnosticArray`` CDR for a simulation time [ns].
 DiagnosticsSource = Callable[[int], bytes]
@@ -41,6 +42,8 @@ class CoordinatorOutput:
         frame_id = cell.settings.frame_id
         self.twin = twin
         self.diagnostics = diagnostics
+        self.frame_id = frame_id
+        self._since: dict = {}  # fault id -> simulation time it became active [s]
         self._belts = cdr.BeltStatesEncoder(frame_id, [b.name for b in cell.belts])
         self._actuators = cdr.ActuatorStatesEncoder(frame_id, [a.name for a in cell.actuators])
 
@@ -57,6 +60,30 @@ class CoordinatorOutput:
             frame.diagnostics = self.diagnostics(t)
         else:
             frame.diagnostics = None
+        if inp.faults or inp.step == 1:
+            frame.faults = self._fault_state(inp)
+        else:
+            frame.faults = None
+
+    def _fault_state(self, inp: StepInput) -> bytes:
+        """Return the ``FaultState`` CDR of the faults active from ``inp.step`` on."""
+        book = self.twin.faults
+        since = self._since
+        if inp.step == 1:
+            since.clear()
+        for event in inp.faults:
+            if event.action == 'inject':
+                since[event.fault.id] = inp.time_ns * 1e-9
+        active = [FaultEntry(f.id, f.kind, f.target, f.params, f.part_type, f.duration,
+                             since.get(f.id, 0.0))
+                  for f in sorted(book.active.values(), key=lambda f: f.id)]
+        for fault_id in [i for i in since if i not in book.active]:
+            del since[fault_id]
+        return encode_fault_state(
+            inp.time_ns, self.frame_id, active,
+            [e.fault.id for e in inp.faults if e.action == 'inject'],
+            [(e.fault.id, e.reason) for e in inp.faults if e.action == 'clear'],
+            book.injected, book.rejected)
 
 
 class MicroOutput:

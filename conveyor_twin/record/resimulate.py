@@ -32,12 +32,16 @@ from conveyor_twin.coord.assembly import build_twin
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.markers import CellMarkers
 from conveyor_twin.output.producers import CoordinatorOutput, MacroOutput, MicroOutput
+from conveyor_twin.faults.book import CLEAR, FaultEvent, INJECT
+from conveyor_twin.faults.model import FaultSpec, validate
+from conveyor_twin.faults.scenario import scenario_from_text, ScenarioError
 from conveyor_twin.record import reader
 from conveyor_twin.record.errors import RecordingError
 from conveyor_twin.record.topics import resolve
 from conveyor_twin.record.writer import (ACCEPTED_ACTUATOR_COMMANDS, ACCEPTED_BELT_COMMANDS,
                                          ACCEPTED_RESETS, ACCEPTED_SPAWNS)
 from conveyor_twin.wire import cdr
+from conveyor_twin.wire.fault_state import decode_fault_state
 from conveyor_twin.wire.schemas import SCHEMAS
 
 #: Topics never compared (by contract name): their content depends on the wall clock.
@@ -73,6 +77,7 @@ class ResimReport:
     steps: int = 0
     commands: int = 0
     spawns: int = 0
+    faults: int = 0
     compared: Dict[str, int] = field(default_factory=Counter)
     skipped: Dict[str, int] = field(default_factory=Counter)
     complete_source: bool = True
@@ -87,7 +92,8 @@ class ResimReport:
         """Return the report as plain data (JSON)."""
         d = self.difference
         return {'path': self.path, 'ok': self.ok, 'steps': self.steps,
-                'commands': self.commands, 'spawns': self.spawns, 'compared': dict(self.compared),
+                'commands': self.commands, 'spawns': self.spawns, 'faults': self.faults,
+                'compared': dict(self.compared),
                 'compared_total': sum(self.compared.values()),
                 'not_compared': dict(self.skipped), 'complete_source': self.complete_source,
                 'difference': None if d is None else {**vars(d), 'text': str(d)}}
@@ -171,7 +177,7 @@ class _Rerun:
     """The cores of a recording's cell, stepped on demand, with the frames they emit."""
 
     def __init__(self, cell: Any, seed: int) -> None:
-        built = build_twin(cell, seed=seed)
+        built = self.built = build_twin(cell, seed=seed)
         self.micro, self.macro, self.twin = built.micro, built.macro, built.twin
         self.output = TwinOutput([CoordinatorOutput(self.twin), MicroOutput(self.micro),
                                   MacroOutput(self.macro)])
@@ -208,6 +214,9 @@ def resimulate(path: str, *, context: Any = None) -> ResimReport:
         raise RecordingError(f'{path}: metadata step_ns {step_ns} differs from the step of '
                              f'cell.yaml ({rerun.twin.dt_ns} ns)')
     _schedule(path, rerun.twin, step_ns, report)
+    if not _schedule_faults(path, rerun.twin, cell, namespace, step_ns, report) \
+            and meta.get('scenario'):
+        _arm_scenario(path, rerun, cell, meta)
     spawns = _spawns(path, cell, step_ns, report)
     markers = _build_markers(rerun, cell, markers_rate)
     _compare(path, rerun, namespace, step_ns, report, markers, spawns)
@@ -231,6 +240,43 @@ def _schedule(path: str, twin: Any, step_ns: int, report: ResimReport) -> None:
                                  f'time {m.log_time} ns, not a step time (step {step_ns} ns)')
         book.schedule(m.log_time // step_ns, command)
         report.commands += 1
+
+
+def _schedule_faults(path: str, twin: Any, cell: Any, namespace: str, step_ns: int,
+                     report: ResimReport) -> bool:
+    """Schedule the faults the recording's ``faults`` stream shows injected and cleared, at
+    their steps with their ids; return False if the stream was not recorded."""
+    topic = resolve('faults', namespace)
+    known: Dict[int, Any] = {}
+    seen = False
+    for m in reader.read_messages(path, topics=[topic], linear=True):
+        seen = True
+        try:
+            state = decode_fault_state(m.data)
+            step = state.stamp_ns // step_ns
+            for entry in state.active:
+                if entry.id in state.injected:
+                    spec = FaultSpec(entry.kind, entry.target, dict(entry.params),
+                                     entry.duration, entry.part_type)
+                    known[entry.id] = validate(cell, spec, entry.id)
+                    twin.faults.schedule(FaultEvent(step, INJECT, known[entry.id], 'recorded'))
+                    report.faults += 1
+            for fault_id, reason in zip(state.cleared, state.cleared_reason):
+                if reason != 'expired':  # expiry follows from the duration
+                    twin.faults.schedule(FaultEvent(step, CLEAR, known[fault_id], reason))
+        except (ValueError, KeyError) as exc:  # CdrError, FaultRejected, an unknown id
+            raise RecordingError(f'{path}: recorded fault state #{m.sequence} on {topic} '
+                                 f'cannot be replayed: {exc}') from None
+    return seen
+
+
+def _arm_scenario(path: str, rerun: '_Rerun', cell: Any, meta: Dict[str, str]) -> None:
+    """Arm the recorded scenario (a recording without the ``faults`` stream)."""
+    try:
+        scenario = scenario_from_text(meta['scenario'], cell, f'{path}:scenario')
+    except ScenarioError as exc:
+        raise RecordingError(f'{path}: metadata conveyor_twin.scenario: {exc}') from None
+    rerun.built.arm_scenario(scenario)
 
 
 def _spawns(path: str, cell: Any, step_ns: int,

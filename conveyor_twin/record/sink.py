@@ -54,6 +54,7 @@ class RecordingSink:
         self._barriers = names.get(contract.LIGHT_BARRIERS)
         self._edges = names.get(contract.LIGHT_BARRIER_EDGES)
         self._density = names.get(contract.DENSITY)
+        self._faults = names.get(contract.FAULTS)
 
     def on_frame(self, frame: Frame) -> None:
         """Queue every message of the frame with its stamp, then its accepted commands."""
@@ -62,7 +63,7 @@ class RecordingSink:
         for name, data in ((self._clock, frame.clock), (self._belts, frame.belt_states),
                            (self._actuators, frame.actuator_states),
                            (self._diagnostics, frame.diagnostics), (self._parts, frame.parts),
-                           (self._barriers, frame.light_barriers)):
+                           (self._barriers, frame.light_barriers), (self._faults, frame.faults)):
             if data is not None and name is not None:
                 record(name, t, data)
         if self._edges is not None:

@@ -15,14 +15,17 @@ from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.assembly import build_twin
 from conveyor_twin.coord.runner import raise_thread_priority, realtime_priority, Runner
 from conveyor_twin.coord.timing import TimeMode
+from conveyor_twin.faults.scenario import Scenario
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.producers import CoordinatorOutput, MacroOutput, MicroOutput
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
+from conveyor_twin.ros.foxglove_bridge import attach
 from conveyor_twin.ros.compat import make_executor, spin_until
 from conveyor_twin.ros.macro_node import MacroNode
 from conveyor_twin.ros.micro_node import MicroNode
 from conveyor_twin.ros.params import parameter_overrides
 from conveyor_twin.ros.qos import publish_failures
+from conveyor_twin.viz.foxglove_view import DEFAULT_STREAM_RATE, FoxgloveView
 
 
 class ComposedTwin:
@@ -33,11 +36,18 @@ class ComposedTwin:
     :param mode: realtime, fast or lockstep.
     :param context: an initialised rclpy Context (tests pass a private one).
     :param max_steps: stop the stepping thread after this many steps (None: run until stop).
+    :param foxglove: ``[HOST:]PORT`` of a live Foxglove view to serve; empty: none.
+    :param foxglove_rate: rate of the per-step streams sent to Foxglove clients [Hz].
+    :param scenario: a validated fault scenario to arm (re-armed after every reset).
+    :raises conveyor_twin.viz.foxglove_view.FoxgloveError: if the Foxglove server cannot listen
+        at ``foxglove`` (nothing is left running).
     """
 
     def __init__(self, cell: Cell, *, seed: int, mode: TimeMode, context: Context,
                  namespace: Optional[str] = None, markers_rate: float = 30.0,
-                 max_steps: Optional[int] = None) -> None:
+                 max_steps: Optional[int] = None, foxglove: str = '',
+                 foxglove_rate: float = DEFAULT_STREAM_RATE,
+                 scenario: Optional[Scenario] = None) -> None:
         self.cell = cell
         self.context = context
         self.assembled = build_twin(cell, seed=seed, layout='composed')
@@ -45,10 +55,14 @@ class ComposedTwin:
         self.macro_stage = self.assembled.macro
         self.twin = self.assembled.twin
         self.runner = Runner(self.twin, mode, max_steps=max_steps, on_error=self._on_error)
+        #: The armed fault scenario (None without one).
+        self.scenario = (self.assembled.arm_scenario(scenario) if scenario is not None
+                         else None)
         overrides = parameter_overrides(
             cell_file=cell.source_file if os.path.isfile(cell.source_file) else '', seed=seed,
             mode=mode, markers_rate=markers_rate,
-            duration=max_steps * cell.settings.step if max_steps else 0.0)
+            duration=max_steps * cell.settings.step if max_steps else 0.0, foxglove=foxglove,
+            scenario=scenario.source_file if scenario is not None else '')
         #: One frame per step of every stream (the nodes, the recorder and other sinks take it).
         self.output = TwinOutput([
             CoordinatorOutput(self.twin,
@@ -71,6 +85,14 @@ class ComposedTwin:
             self.executor.add_node(node)
         self._spin_thread: Optional[threading.Thread] = None
         self._stop_spin = threading.Event()
+        #: The live Foxglove view (None without ``foxglove``).
+        self.foxglove: Optional[FoxgloveView] = None
+        if foxglove:
+            try:
+                self.foxglove = attach(self, foxglove, stream_rate=foxglove_rate)
+            except BaseException:
+                self.stop()
+                raise
 
     def _on_error(self, exc: BaseException) -> None:
         self.coordinator.get_logger().error(f'simulation stopped: {exc!r}')
@@ -105,3 +127,5 @@ class ComposedTwin:
         self.executor.shutdown(timeout_sec=5.0)
         for node in (self.coordinator, self.micro_node, self.macro_node):
             node.destroy_node()
+        if self.foxglove is not None:
+            self.foxglove.stop()

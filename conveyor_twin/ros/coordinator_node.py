@@ -13,7 +13,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from builtin_interfaces.msg import Time
 from conveyor_twin_msgs.msg import ActuatorCommand, BeltCommand
-from conveyor_twin_msgs.srv import Reset, SpawnParts, Step
+from conveyor_twin_msgs.srv import ClearFault, InjectFault, Reset, SpawnParts, Step
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.node import Node
@@ -30,6 +30,7 @@ from conveyor_twin.coord.runner import Runner
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.coord.twin import Twin
+from conveyor_twin.faults.model import ActiveFault, FaultRejected, FaultSpec
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.producers import CoordinatorOutput
 from conveyor_twin.ros import coupling
@@ -39,7 +40,8 @@ from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures
 from conveyor_twin.ros.stream_publisher import StreamPublisher
 
 #: The streams this node publishes from the frames.
-STREAMS = (contract.CLOCK, contract.BELT_STATES, contract.ACTUATOR_STATES, contract.DIAGNOSTICS)
+STREAMS = (contract.CLOCK, contract.BELT_STATES, contract.ACTUATOR_STATES, contract.DIAGNOSTICS,
+           contract.FAULTS)
 
 REMOTE_STEP_TIMEOUT = 10.0        # s a split scale node may take to report a step done
 COUNTERS_TIMEOUT = 2.0            # s the split scale nodes may take to send their counters
@@ -89,7 +91,13 @@ class CoordinatorNode(Node):
         create_service(self, contract.STEP, self._on_step)
         create_service(self, contract.RESET, self._on_reset)
         create_service(self, contract.SPAWN_PARTS, self._on_spawn)
+        create_service(self, contract.INJECT_FAULT, self._on_inject_fault)
+        create_service(self, contract.CLEAR_FAULT, self._on_clear_fault)
+        twin.step_listeners.append(self._log_faults)
         self._remote_roles = tuple(remote_roles)
+        #: The scale nodes send measures for a scenario's triggers with every step reply.
+        self.measures_wanted = False
+        self._measures: Dict[int, bytes] = {}
         #: Called with (kind 'spawn' or 'reset', sim time before it [ns], the request) for every
         #: successful ``spawn_parts``/``reset`` call, under the twin's lock (the recorder).
         self.call_listeners: List[Callable[[str, int, Any], None]] = []
@@ -148,10 +156,35 @@ class CoordinatorNode(Node):
                      else 'running in time'),
             values=[KeyValue(key=k, value=v) for k, v in values.items()])
         sec, nanosec = stamp(time_ns)
-        msg = DiagnosticArray(status=[status])
+        msg = DiagnosticArray(status=[status, self._fault_status()])
         msg.header.stamp = Time(sec=sec, nanosec=nanosec)
         msg.header.frame_id = self._frame
         return msg
+
+    def _fault_status(self) -> DiagnosticStatus:
+        """The faults' status: WARN naming every active fault, OK with none."""
+        book = self.twin.faults
+        active = sorted(book.active.values(), key=lambda f: f.id)
+        values = {f'faults_{k}': str(v) for k, v in book.counters().items()}
+        values['faults_last_rejection'] = book.last_rejection
+        fa = self.twin.fault_actuation
+        values['faults_commands_lost'] = str(fa.dropped)
+        values['faults_commands_delayed'] = str(fa.delayed)
+        return DiagnosticStatus(
+            level=DiagnosticStatus.WARN if active else DiagnosticStatus.OK,
+            name='conveyor_twin: faults', hardware_id=self.twin.cell.settings.name,
+            message=(f'{len(active)} active: ' + ', '.join(_describe(f) for f in active)
+                     if active else 'no active fault'),
+            values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+    def _log_faults(self, inp: StepInput, commands: List[Command]) -> None:
+        """Log every fault injected or cleared (WARN), as it takes effect."""
+        if not inp.faults:
+            return
+        for event in inp.faults:
+            verb = 'injected' if event.action == 'inject' else f'cleared ({event.reason})'
+            self.get_logger().warning(f'fault {verb} at step {event.step}: '
+                                      f'{_describe(event.fault)}')
 
     # -- split layout --------------------------------------------------------------------
     def _on_done(self, data: bytes) -> None:
@@ -187,10 +220,25 @@ class CoordinatorNode(Node):
 
     def _step_remote(self, inp: StepInput, commands: List[Command]) -> None:
         replies = self._send_and_wait(codec.step_payload(inp), inp.step)
+        if self.measures_wanted:  # a scenario's triggers: the scale nodes' measures first
+            for role, reply in replies.items():
+                replies[role], self._measures[role] = codec.split_step_reply(reply)
         # the scale nodes send their counters on diagnostics steps only: keep the last ones
         self._replies_fresh = all(replies.get(r) for r in self._remote_roles)
         if self._replies_fresh:
             self._step_replies = replies
+
+    def measured_edge_count(self) -> np.ndarray:
+        """Every light barrier's reported edge count after the last step, as the micro node
+        measured it (split layout, a scenario with triggers)."""
+        return codec.decode_measures(self._measures[codec.MICRO_ROLE])[0]
+
+    def measured_zone_parts(self, index: int) -> float:
+        """The parts in zone ``index`` after the last step: the micro node's bodies plus the
+        macro node's density [parts] (split layout, a scenario with triggers)."""
+        micro = codec.decode_measures(self._measures[codec.MICRO_ROLE])[1]
+        macro = codec.decode_measures(self._measures[codec.MACRO_ROLE])[1]
+        return float(micro[index]) + float(macro[index])
 
     def last_replies(self) -> Dict[int, bytes]:
         """Return each split scale node's counters (reply bytes, by role) for the current state:
@@ -329,6 +377,35 @@ class CoordinatorNode(Node):
         response.id = [int(i) for i in ids]
         return response
 
+    def _on_inject_fault(self, request: InjectFault.Request,
+                         response: InjectFault.Response) -> InjectFault.Response:
+        names, values = list(request.param_names), list(request.param_values)
+        try:
+            if len(names) != len(values):
+                raise self.twin.faults.reject(
+                    f'{len(names)} param_names but {len(values)} param_values')
+            fault = self.twin.faults.inject(FaultSpec(
+                request.kind, request.target, dict(zip(names, values)),
+                float(request.duration), request.part_type))
+        except FaultRejected as exc:
+            response.success, response.message = False, f'rejected, nothing changed: {exc}'
+            self.get_logger().warning(f'inject_fault {response.message}')
+            return response
+        response.success, response.id = True, fault.id
+        response.message = f'fault {fault.id} takes effect at the next step'
+        return response
+
+    def _on_clear_fault(self, request: ClearFault.Request,
+                        response: ClearFault.Response) -> ClearFault.Response:
+        try:
+            fault = self.twin.faults.clear(int(request.id))
+        except FaultRejected as exc:
+            response.success, response.message = False, f'rejected, nothing changed: {exc}'
+            return response
+        response.success = True
+        response.message = f'fault {fault.id} ({fault.kind}) is cleared at the next step'
+        return response
+
     def _spawn_remote(self, spawn: SpawnRequest) -> np.ndarray:
         payload = codec.spawn_payload(spawn.type_index, spawn.x, spawn.y, spawn.yaw)
         replies = self._send_and_wait(payload, self.twin.step_index)
@@ -356,6 +433,13 @@ class CoordinatorNode(Node):
             'publish_failures': self.publish_failures(counters),
             **counters,
         }
+
+
+def _describe(fault: ActiveFault) -> str:
+    """Return ``kind target (id N)`` of a fault, with its parameters."""
+    params = ', '.join(f'{k}={v:g}' for k, v in fault.params)
+    target = f' {fault.target}' if fault.target else ''
+    return f'{fault.kind}{target}' + (f' [{params}]' if params else '') + f' (id {fault.id})'
 
 
 def summary_json(node: CoordinatorNode) -> str:

@@ -1,23 +1,26 @@
-"""Attach a :class:`~conveyor_twin.viz.foxglove_view.FoxgloveView` to a composed twin.
+"""Attach a :class:`~conveyor_twin.viz.foxglove_view.FoxgloveView` to a twin.
 
-``conveyor-twin run --foxglove [HOST:]PORT`` and tests call :func:`attach` before the twin
-starts. The view is a sink of the twin's per-step frames (every stream's CDR bytes, built once
-per step, as the ROS publishers send them); commands published by Foxglove clients go through the
-coordinator's command book like ``belt_command``/``actuator_command`` (rejections are counted in
-``diagnostics`` and logged); ``step``, ``reset`` and ``spawn_parts`` are served by the
-coordinator's own service callbacks (requests and responses in CDR). The address is the
-coordinator's read-only parameter ``foxglove``.
+Composed layout (:func:`attach`): the view is a sink of the twin's per-step frames (every
+stream's CDR bytes, built once per step, as the ROS publishers send them). Split layout
+(:func:`attach_split`, in the ``scale_coordinator`` process): the coordinator's own frames, and
+the scale nodes' streams taken from ROS by raw subscriptions (:class:`ScaleStreams`). Either way
+the view is fed only while a Foxglove client is subscribed to something, so with no client the
+twin pays nothing. Commands published by Foxglove clients go through the coordinator's command
+book like ``belt_command``/``actuator_command`` (rejections are counted in ``diagnostics`` and
+logged); ``step``, ``reset`` and ``spawn_parts`` are served by the coordinator's own service
+callbacks (requests and responses in CDR). The address is the nodes' read-only parameter
+``foxglove`` (``conveyor-twin run --foxglove``, ``LockstepTwin(foxglove=...)``).
 """
 
-from typing import Any, Callable, Dict, Optional
+import threading
+from typing import Any, Callable, Dict, List, Optional
 
 from conveyor_twin_msgs.srv import Reset, SpawnParts, Step
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.serialization import deserialize_message, serialize_message
 
 from conveyor_twin import contract
 from conveyor_twin.coord.commands import BELT, CommandRejected
-from conveyor_twin.output.frame import Frame
+from conveyor_twin.ros.endpoints import create_subscription
 from conveyor_twin.record.topics import resolve
 from conveyor_twin.viz.foxglove_view import (DEFAULT_BACKLOG, DEFAULT_SCENE_RATE,
                                              DEFAULT_STREAM_RATE, FoxgloveView,
@@ -45,33 +48,10 @@ def _cdr_service(srv_type: Any, callback: Callable) -> Callable[[bytes], bytes]:
     return handle
 
 
-class _FrameFeed:
-    """Hand every message of the twin's frames (and markers) to a view, under absolute names."""
-
-    def __init__(self, view: FoxgloveView, names: Dict[contract.Topic, str]) -> None:
-        self._view = view
-        self._names = names
-
-    def on_frame(self, frame: Frame) -> None:
-        """Pass the step's messages on (the view only queues them: it never blocks)."""
-        view = self._view
-        if not view.active:
-            return
-        names = self._names
-        for topic, stamp_ns, data in frame.messages():
-            view.sink(names[topic], stamp_ns, data)
-
-    def on_message(self, topic: contract.Topic, stamp_ns: int, data: bytes) -> None:
-        """Pass an off-step message (markers) on."""
-        name = self._names.get(topic)
-        if name is not None and self._view.active:
-            self._view.sink(name, stamp_ns, data)
-
-
 def attach(composed: Any, address: str, *, stream_rate: float = DEFAULT_STREAM_RATE,
            scene_rate: float = DEFAULT_SCENE_RATE,
            backlog: int = DEFAULT_BACKLOG) -> FoxgloveView:
-    """Start a Foxglove server for a composed twin not yet started; return the view.
+    """Start a Foxglove server for a composed twin (``ComposedTwin``); return the view.
 
     :param address: ``[HOST:]PORT`` (host 127.0.0.1 by default; port 0: any free port).
     :param stream_rate: rate of the per-step streams sent to clients [Hz].
@@ -79,12 +59,87 @@ def attach(composed: Any, address: str, *, stream_rate: float = DEFAULT_STREAM_R
     :param backlog: messages queued at most, in the twin and per client [1].
     :raises FoxgloveError: if the address is invalid, the host unknown or the port taken.
     """
-    host, port = parse_address(address)
-    coordinator = composed.coordinator
-    twin = composed.twin
+    output = composed.output
+    view = _view(composed.coordinator, composed.twin, composed.cell, stream_rate=stream_rate,
+                 scene_rate=scene_rate, backlog=backlog)
+    view.on_active = lambda active: (output.subscribe if active else output.unsubscribe)(view)
+    _serve(view, composed.coordinator, address)
+    return view
+
+
+def attach_split(coordinator: Any, address: str, *, stream_rate: float = DEFAULT_STREAM_RATE,
+                 scene_rate: float = DEFAULT_SCENE_RATE,
+                 backlog: int = DEFAULT_BACKLOG) -> FoxgloveView:
+    """Start a Foxglove server in the split layout's coordinator process; return the view.
+
+    The coordinator's streams come from its frames; the scale nodes' streams (parts, light
+    barriers, edges, density, markers) from ROS, subscribed only while a client watches.
+    Parameters as :func:`attach`.
+    """
+    twin = coordinator.twin
+    view = _view(coordinator, twin, twin.cell, stream_rate=stream_rate, scene_rate=scene_rate,
+                 backlog=backlog)
+    scale = ScaleStreams(coordinator, view)
+    output = coordinator.output
+
+    def on_active(active: bool) -> None:
+        (output.subscribe if active else output.unsubscribe)(view)
+        scale.set_active(active)
+
+    view.on_active = on_active
+    _serve(view, coordinator, address)
+    return view
+
+
+class ScaleStreams:
+    """Raw subscriptions of the coordinator to the scale nodes' streams, feeding a view.
+
+    Created when the first client subscribes, destroyed when the last one goes; each message
+    goes to :meth:`FoxgloveView.sink` (which thins the per-step streams to its rate) with the
+    stamp of its header, or the latest step's time for ``markers``.
+    """
+
+    TOPICS = (contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES,
+              contract.DENSITY, contract.MARKERS)
+
+    def __init__(self, node: Any, view: FoxgloveView) -> None:
+        self.node = node
+        self.view = view
+        self._subscriptions: List[Any] = []
+        self._lock = threading.Lock()
+
+    def set_active(self, active: bool) -> None:
+        """Subscribe (True) or unsubscribe (False) the scale streams."""
+        with self._lock:
+            if active and not self._subscriptions:
+                self._subscriptions = [create_subscription(self.node, topic,
+                                                           self._callback(topic), raw=True)
+                                       for topic in self.TOPICS]
+            elif not active:
+                for subscription in self._subscriptions:
+                    self.node.destroy_subscription(subscription)
+                self._subscriptions = []
+
+    def _callback(self, topic: contract.Topic) -> Callable[[bytes], None]:
+        name = resolve(topic.name, self.node.get_namespace())
+        sink = self.view.sink
+        if topic.stamp is contract.Stamp.HEADER:
+            return lambda data: sink(name, _header_stamp_ns(data), data)
+        output = self.node.output
+        return lambda data: sink(name, output.frame.time_ns, data)
+
+
+def _header_stamp_ns(data: bytes) -> int:
+    """Return the stamp of a CDR message whose first field is a Time or Header [ns]."""
+    return int.from_bytes(data[4:8], 'little') * 1_000_000_000 + int.from_bytes(data[8:12],
+                                                                                  'little')
+
+
+def _view(coordinator: Any, twin: Any, cell: Any, **rates: Any) -> FoxgloveView:
+    """Build the view of a twin: its streams, commands through the command book, services."""
     namespace = coordinator.get_namespace()
-    names = {topic: resolve(topic.name, namespace) for topic in contract.STREAMS}
-    streams: Dict[str, str] = {names[topic]: topic.type_name for topic in contract.STREAMS}
+    streams: Dict[str, str] = {resolve(topic.name, namespace): topic.type_name
+                               for topic in contract.STREAMS}
 
     def on_command(kind: str, name: str, value: float) -> Optional[str]:
         try:
@@ -102,19 +157,20 @@ def attach(composed: Any, address: str, *, stream_rate: float = DEFAULT_STREAM_R
     services = tuple(ServiceSpec(name, type_name, request, response,
                                  _cdr_service(*callbacks[name]))
                      for name, type_name, request, response in SERVICE_TEXTS)
-    view = FoxgloveView(composed.cell, streams=streams, namespace=namespace,
-                        step_s=composed.cell.settings.step, on_command=on_command,
-                        services=services, stream_rate=stream_rate, scene_rate=scene_rate,
-                        backlog=backlog)
+    view = FoxgloveView(cell, streams=streams, namespace=namespace,
+                        step_s=cell.settings.step, on_command=on_command,
+                        services=services, **rates)
     view.on_invalid = lambda reason: _count_invalid(twin, coordinator, reason)
-    view.start(host, port)
-    composed.output.subscribe(_FrameFeed(view, names))
-    coordinator.add_counters(lambda: {f'foxglove_{k}': v for k, v in view.counters().items()})
-    coordinator.declare_parameter(
-        'foxglove', f'{host}:{view.port}',
-        ParameterDescriptor(description='address of the Foxglove WebSocket server '
-                            '(conveyor-twin run --foxglove)', read_only=True))
     return view
+
+
+def _serve(view: FoxgloveView, coordinator: Any, address: str) -> None:
+    """Start the view's server at ``address``, count it in diagnostics and log where it is."""
+    host, port = parse_address(address)
+    view.start(host, port)
+    coordinator.add_counters(lambda: {f'foxglove_{k}': v for k, v in view.counters().items()})
+    coordinator.get_logger().info(f'Foxglove view at ws://{host}:{view.port} (Foxglove: Open '
+                                  'connection, Foxglove WebSocket)')
 
 
 def _count_invalid(twin: Any, coordinator: Any, reason: str) -> None:

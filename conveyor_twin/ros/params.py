@@ -22,6 +22,9 @@ class TwinParameters:
     :param mode: realtime, fast or lockstep (coordinator only).
     :param markers_rate: MarkerArray rate [Hz]; 0 disables markers.
     :param duration: stop after this much simulated time [s]; 0 runs until shut down.
+    :param foxglove: ``[HOST:]PORT`` of a live Foxglove view the coordinator serves; empty:
+        none.
+    :param scenario: fault scenario file the coordinator arms; empty: none.
     """
 
     cell_file: str
@@ -29,6 +32,8 @@ class TwinParameters:
     mode: TimeMode
     markers_rate: float
     duration: float
+    foxglove: str = ''
+    scenario: str = ''
 
 
 def declare_twin_parameters(node: Node, *, step_s: float = 1e-3) -> TwinParameters:
@@ -54,6 +59,12 @@ def declare_twin_parameters(node: Node, *, step_s: float = 1e-3) -> TwinParamete
                            'rate of visualization markers on `markers` [Hz]; 0 disables them')
     duration = declare('duration', 0.0,
                        'stop after this much simulated time [s]; 0 runs until shutdown')
+    foxglove = declare('foxglove', '',
+                       'address [HOST:]PORT of the live Foxglove WebSocket view the coordinator '
+                       'serves (host 127.0.0.1 by default); empty: none')
+    scenario = declare('scenario', '',
+                       'fault scenario YAML the coordinator arms at start (docs/faults.md); '
+                       'empty: none')
     declare('namespace', node.get_namespace(),
             'namespace of the twin\'s relative topics and services (set with --namespace or '
             '-r __ns:=...)', ignore_override=True)
@@ -69,13 +80,17 @@ def declare_twin_parameters(node: Node, *, step_s: float = 1e-3) -> TwinParamete
                          + ', '.join(m.value for m in TimeMode)) from None
     if markers_rate < 0.0 or duration < 0.0:
         raise ValueError('parameters markers_rate and duration must not be negative')
-    return TwinParameters(cell_file, int(seed), time_mode, float(markers_rate), float(duration))
+    return TwinParameters(cell_file, int(seed), time_mode, float(markers_rate), float(duration),
+                          str(foxglove), str(scenario))
 
 
 def parameter_overrides(*, cell_file: str, seed: int, mode: TimeMode, markers_rate: float,
-                        duration: float) -> List[Parameter]:
+                        duration: float, foxglove: str = '',
+                        scenario: str = '') -> List[Parameter]:
     """Return the parameter values of a composed run, for the nodes built in this process."""
     return [Parameter('cell_file', value=cell_file), Parameter('seed', value=int(seed)),
             Parameter('mode', value=TimeMode(mode).value),
             Parameter('markers_rate', value=float(markers_rate)),
-            Parameter('duration', value=float(duration))]
+            Parameter('duration', value=float(duration)),
+            Parameter('foxglove', value=str(foxglove)),
+            Parameter('scenario', value=str(scenario))]

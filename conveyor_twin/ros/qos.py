@@ -34,6 +34,8 @@ CLOCK_QOS = to_rclpy(offered.CLOCK_QOS)
 COMMAND_QOS = to_rclpy(offered.COMMAND_QOS)
 #: Diagnostics (1 Hz) and markers (viewer rate).
 SLOW_QOS = to_rclpy(offered.SLOW_QOS)
+#: The active faults: latched (transient local, keep-last 100).
+LATCHED_QOS = to_rclpy(offered.LATCHED_QOS)
 #: Per-step coupling between the twin's own processes (split layout): nothing may be lost.
 COUPLING_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                           reliability=ReliabilityPolicy.RELIABLE,

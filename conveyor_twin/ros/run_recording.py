@@ -151,13 +151,23 @@ def start_recording(composed: Any, args: argparse.Namespace, *, seed: int,
         step_ns=composed.twin.dt_ns,
         metadata={'recorded_by': 'conveyor-twin run', 'namespace': namespace,
                   'markers_rate': repr(float(args.markers_rate)), 'mode': mode,
-                  'cell_file': args.cell or '', 'commands': ' '.join(args.command)},
+                  'cell_file': args.cell or '', 'commands': ' '.join(args.command),
+                  **_scenario_metadata(composed)},
         on_thread_start=_writer_priority if mode == 'realtime' else None)
     try:
         return TwinRecording(composed, recorder)
     except BaseException:
         recorder.close()
         raise
+
+
+def _scenario_metadata(composed: Any) -> Dict[str, str]:
+    """The armed scenario's file and YAML text (the faults themselves are the ``faults``
+    stream, which re-simulation replays)."""
+    runner = getattr(composed, 'scenario', None)
+    if runner is None:
+        return {}
+    return {'scenario_file': runner.scenario.source_file, 'scenario': runner.scenario.text}
 
 
 def _writer_priority() -> None:

@@ -122,6 +122,8 @@ class ScaleNode(Node):
         the coordinator's diagnostics steps)."""
         self.publish_step(inp)
         reply = self._counters() if inp.step % DIAGNOSTICS_PERIOD_STEPS == 0 else b''
+        if self.measure is not None:
+            reply = codec.step_reply(reply, self.measure())
         self._report(inp.step, reply)
 
     def _counters(self) -> bytes:
@@ -174,5 +176,8 @@ class ScaleNode(Node):
 
     _last_step = 0
     _done_matched = False
+    #: Returns what a scenario's triggers need after every step (set when the coordinator arms
+    #: a scenario with triggers on the cell's state; :meth:`AssembledTwin.trigger_measures`).
+    measure: Optional[Callable[[], bytes]] = None
     exchange_pub = None  # the hand-over exchange's writer (split layout, coupled cells)
     _pending: Optional[StepInput] = None  # stepped, its hand-over not finished

@@ -41,12 +41,26 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
     context, params, cell, seed = started
     max_steps = round(params.duration / cell.settings.step) if params.duration > 0 else None
     assembled = build_twin(cell, seed=seed, layout='coordinator')
+    scenario = None
+    if params.scenario:
+        from conveyor_twin.faults.scenario import load_scenario, ScenarioError
+        try:
+            scenario = load_scenario(params.scenario, cell)
+        except ScenarioError as exc:
+            print(f'scale_coordinator: scenario refused, the twin was not started: {exc}',
+                  file=sys.stderr, flush=True)
+            context.try_shutdown()
+            return 2
     runner = Runner(assembled.twin, params.mode, max_steps=max_steps)
     holder: Dict[str, CoordinatorNode] = {}
     node = CoordinatorNode(assembled.twin, runner, context=context,
                            remote_roles=assembled.remote_roles,
                            counters=lambda: _remote_counters(holder['node']))
     holder['node'] = node
+    if scenario is not None:  # triggers read what the scale nodes measure after each step
+        node.measures_wanted = scenario.conditional
+        assembled.arm_scenario(scenario, edge_count=node.measured_edge_count,
+                               zone_parts_of=node.measured_zone_parts)
     executor = make_executor(context)
     executor.add_node(node)
     coupling_executor = make_executor(context)
@@ -60,11 +74,20 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     code = 0
-    if not node.wait_for_scales(SCALE_CONNECT_TIMEOUT):
+    view = None
+    if params.foxglove:
+        from conveyor_twin.ros.foxglove_bridge import attach_split
+        from conveyor_twin.viz.foxglove_view import FoxgloveError
+        try:
+            view = attach_split(node, params.foxglove)
+        except FoxgloveError as exc:
+            node.get_logger().error(f'{exc}; the twin was not started')
+            code = 2
+    if code == 0 and not node.wait_for_scales(SCALE_CONNECT_TIMEOUT):
         node.get_logger().error('micro_simulator and macro_simulator did not connect within '
                                 f'{SCALE_CONNECT_TIMEOUT:g} s')
         code = 1
-    else:
+    elif code == 0:
         runner.start()
         while not stop.is_set():
             if params.mode is not TimeMode.LOCKSTEP and not runner.running:
@@ -75,6 +98,8 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
             node.get_logger().error(f'simulation stopped: {runner.error!r}')
             code = 1
     print(SUMMARY_PREFIX + json.dumps(node.summary(), sort_keys=True), flush=True)
+    if view is not None:
+        view.stop()
     spin_stop.set()
     for spinner in spinners:
         spinner.join(5.0)
@@ -87,15 +112,21 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
 
 
 def ros_args(cell_file: str, seed: Optional[int], mode: str, duration: float,
-             namespace: Optional[str], markers_rate: float) -> List[str]:
+             namespace: Optional[str], markers_rate: float, *, foxglove: str = '',
+             scenario: str = '') -> List[str]:
     """Return the ``--ros-args`` of the three processes of a split run (durations [s], rates
-    [Hz])."""
+    [Hz]; ``foxglove``: ``[HOST:]PORT`` of the coordinator's Foxglove view, empty: none;
+    ``scenario``: the fault scenario file the coordinator arms, empty: none)."""
     args = ['--ros-args', '-p', f'mode:={mode}', '-p', f'duration:={float(duration)}',
             '-p', f'markers_rate:={float(markers_rate)}']
     if cell_file:  # rcl cannot parse an empty override; empty is the default anyway
         args += ['-p', f'cell_file:={cell_file}']
     if seed is not None:
         args += ['-p', f'seed:={seed}']
+    if foxglove:  # quoted: rcl would read a bare port as an integer
+        args += ['-p', f'foxglove:="{foxglove}"']
+    if scenario:
+        args += ['-p', f'scenario:={scenario}']
     if namespace:
         args += ['-r', f'__ns:={namespace}']
     return args

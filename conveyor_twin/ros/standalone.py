@@ -58,6 +58,13 @@ def run_scale_node(layout: Layout, make_node: Callable[..., Node],
     warm_up(cell, seed)  # load the step kernels now, not during the first steps
     node = make_node(assembled, context=context, remote=True, markers_rate=params.markers_rate,
                      step_s=cell.settings.step)
+    if params.scenario:  # the coordinator checks the file; here only: does it need measures?
+        from conveyor_twin.faults.scenario import load_scenario, ScenarioError
+        try:
+            if load_scenario(params.scenario, cell).conditional:
+                node.measure = assembled.trigger_measures()
+        except ScenarioError:
+            pass
     executor = make_executor(context)
     executor.add_node(node)
     stop = threading.Event()

@@ -17,7 +17,8 @@ from conveyor_twin.ros.qos import RawPublisher
 #: Frame attribute of every stream with one message per step (or none).
 _SINGLE = {contract.CLOCK: 'clock', contract.BELT_STATES: 'belt_states',
            contract.ACTUATOR_STATES: 'actuator_states', contract.DIAGNOSTICS: 'diagnostics',
-           contract.PARTS: 'parts', contract.LIGHT_BARRIERS: 'light_barriers'}
+           contract.PARTS: 'parts', contract.LIGHT_BARRIERS: 'light_barriers',
+           contract.FAULTS: 'faults'}
 
 
 class StreamPublisher:

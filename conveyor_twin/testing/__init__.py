@@ -17,8 +17,9 @@ parallel runs (``pytest -n 2``), never see each other's traffic. See ``docs/test
 
 from conveyor_twin.testing.cells import quiet_cell
 from conveyor_twin.testing.driver import CommandResult, Driver
-from conveyor_twin.testing.errors import (CommandRejectedError, ConditionNotMet, ServiceError,
-                                          TwinClosedError, TwinTimeoutError)
+from conveyor_twin.testing.errors import (CommandRejectedError, ConditionNotMet,
+                                          FaultRejectedError, ServiceError, TwinClosedError,
+                                          TwinTimeoutError)
 from conveyor_twin.testing.harness import (ActuatorState, BarrierState, BeltSample,
                                            BeltState, CommandRecord, DEFAULT_CHUNK,
                                            DensityGrid, Edge, LockstepTwin, PartStates)
@@ -32,6 +33,7 @@ __all__ = [
     'ActuatorState', 'BarrierState', 'BeltSample', 'BeltState', 'claim_domain_id',
     'CommandRecord', 'CommandRejectedError', 'CommandResult', 'ConditionNotMet',
     'configure_session', 'dead_shm_files', 'DEFAULT_CHUNK', 'DensityGrid', 'DomainLease', 'Driver', 'Edge',
+    'FaultRejectedError',
     'lease_domain_id', 'LockstepTwin', 'PartStates', 'Probe', 'quiet_cell',
     'remove_dead_shm_files', 'ros_subprocess_env', 'RosProcesses', 'ServiceError',
     'stop_all_started', 'stop_process', 'TwinClosedError', 'TwinTimeoutError', 'wait_for',

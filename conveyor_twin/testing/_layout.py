@@ -61,7 +61,8 @@ class RunningLayout:
 
 
 def start_layout(cell: Cell, cell_file: Optional[str], *, seed: int, layout: Layout,
-                 context: Context, domain_id: int) -> RunningLayout:
+                 context: Context, domain_id: int, foxglove: str = '',
+                 scenario: Optional[object] = None) -> RunningLayout:
     """Build and start a lockstep twin of ``cell``.
 
     :param cell: the validated cell
@@ -71,6 +72,8 @@ def start_layout(cell: Cell, cell_file: Optional[str], *, seed: int, layout: Lay
     :param layout: ``composed`` (this process, ``context``) or ``split`` (three processes)
     :param context: the harness's initialised rclpy context
     :param domain_id: the ROS domain of ``context`` (the split processes join it)
+    :param foxglove: ``[HOST:]PORT`` of a live Foxglove view; empty: none
+    :param scenario: a validated fault scenario to arm, or None
     :return: the running twin
     :raises ValueError: on an unknown layout, or a split layout of a cell without a file
     """
@@ -78,7 +81,7 @@ def start_layout(cell: Cell, cell_file: Optional[str], *, seed: int, layout: Lay
         from conveyor_twin.ros.compose import ComposedTwin
 
         twin = ComposedTwin(cell, seed=seed, mode=TimeMode.LOCKSTEP, context=context,
-                            markers_rate=0.0)
+                            markers_rate=0.0, foxglove=foxglove, scenario=scenario)
         twin.start()
         return RunningLayout(composed=twin)
     if layout != 'split':
@@ -89,7 +92,8 @@ def start_layout(cell: Cell, cell_file: Optional[str], *, seed: int, layout: Lay
     from conveyor_twin.ros.split import ros_args
 
     args = ros_args(os.path.abspath(cell_file) if cell_file else '', seed, 'lockstep', 0.0,
-                    None, 0.0)
+                    None, 0.0, foxglove=foxglove,
+                    scenario=os.path.abspath(scenario.source_file) if scenario else '')
     processes = RosProcesses(domain_id=domain_id)
     log_dir = Path(tempfile.mkdtemp(prefix='conveyor_twin_split_'))
     for module in SPLIT_MODULES:

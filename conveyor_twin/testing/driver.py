@@ -9,7 +9,7 @@ answer on ``command_status`` (accepted, or rejected with the reason), and calls 
 from typing import Any, Callable, Dict, List, NamedTuple, Optional, Union
 
 from conveyor_twin_msgs.msg import ActuatorCommand, BeltCommand
-from conveyor_twin_msgs.srv import Reset, SpawnParts, Step
+from conveyor_twin_msgs.srv import ClearFault, InjectFault, Reset, SpawnParts, Step
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.context import Context
 from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
@@ -20,6 +20,7 @@ from conveyor_twin.testing.errors import TwinTimeoutError
 from conveyor_twin.testing.probe import Probe, STREAMS
 from conveyor_twin.testing.ros_env import wait_for
 from conveyor_twin.wire import cdr
+from conveyor_twin.wire.fault_state import decode_fault_state, FaultStateData
 
 TIMEOUT = 60.0  # longest wait for one service answer, one chunk's streams or one command [s]
 EVERY_STEP = ('parts', 'light_barriers', 'belt_states', 'actuator_states')
@@ -54,6 +55,12 @@ def _command_key(topic: str, target: str, value: float) -> tuple:
     return topic, target.split('\x00', 1)[0], repr(float(value))
 
 
+def _stamp_ns(data: bytes) -> int:
+    """Return the stamp of a CDR message whose first field is a Time or Header [ns]."""
+    return int.from_bytes(data[4:8], 'little') * 1_000_000_000 + int.from_bytes(data[8:12],
+                                                                                  'little')
+
+
 class Driver:
     """A probe, clients and command publishers in one executor, against a twin's namespace.
 
@@ -73,6 +80,8 @@ class Driver:
         self.step_client = self.probe.create_client(Step, 'step')
         self.spawn_client = self.probe.create_client(SpawnParts, 'spawn_parts')
         self.reset_client = self.probe.create_client(Reset, 'reset')
+        self.inject_client = self.probe.create_client(InjectFault, 'inject_fault')
+        self.clear_client = self.probe.create_client(ClearFault, 'clear_fault')
         self.belt_pub = self.probe.create_publisher(BeltCommand, 'belt_command', COMMAND_QOS)
         self.actuator_pub = self.probe.create_publisher(ActuatorCommand, 'actuator_command',
                                                         COMMAND_QOS)
@@ -82,6 +91,7 @@ class Driver:
         return wait_for(lambda: self.probe.matched() and self.step_client.service_is_ready()
                         and self.spawn_client.service_is_ready()
                         and self.reset_client.service_is_ready()
+                        and self.inject_client.service_is_ready()
                         and self.belt_pub.get_subscription_count() > 0
                         and self.actuator_pub.get_subscription_count() > 0
                         and all(s.get_publisher_count() > 0 for s in self.probe._subs
@@ -111,13 +121,46 @@ class Driver:
             k = min(n, chunk)
             before = self.counts()
             response = self.call(self.step_client, Step.Request(steps=k))
-            want = {t: before[t] + k for t in EVERY_STEP}
-            want['density'] = before['density'] + k * self.density_per_step
-            self.wait(lambda: all(len(self.probe.received[t]) >= c for t, c in want.items()),
+            want_ns = response.stamp.sec * 1_000_000_000 + response.stamp.nanosec
+            want_density = before['density'] + k * self.density_per_step
+            self.wait(lambda: self._arrived(want_ns, want_density),
                       f'streams of steps up to {response.step}')
             self.settle_commands()
             n -= k
         return response
+
+    def _arrived(self, want_ns: int, want_density: int) -> bool:
+        """True once every per-step stream has a message of ``want_ns`` (streams silenced by
+        a ``stream_outage`` fault, as the latest fault state says, are not waited for)."""
+        received = self.probe.received
+        silent = self.silenced()
+        for topic in EVERY_STEP:
+            if topic not in silent:
+                messages = received[topic]
+                if not messages or _stamp_ns(messages[-1]) < want_ns:
+                    return False
+        return 'density' in silent or len(received['density']) >= want_density
+
+    def fault_state(self) -> Optional[FaultStateData]:
+        """Return the latest ``faults`` message received, decoded (None before the first)."""
+        messages = self.probe.received['faults']
+        return decode_fault_state(messages[-1]) if messages else None
+
+    def silenced(self) -> set:
+        """Return the streams a ``stream_outage`` fault silences, as the latest fault state
+        says."""
+        state = self.fault_state()
+        if state is None:
+            return set()
+        return {f.target for f in state.active if f.kind == 'stream_outage'}
+
+    def inject_fault(self, request: InjectFault.Request) -> InjectFault.Response:
+        """Call ``inject_fault``; return its response."""
+        return self.call(self.inject_client, request)
+
+    def clear_fault(self, fault_id: int) -> ClearFault.Response:
+        """Call ``clear_fault``; return its response."""
+        return self.call(self.clear_client, ClearFault.Request(id=int(fault_id)))
 
     def drain(self, limit: int = 100_000) -> None:
         """Run every callback that is ready now, of the probe and of the nodes attached to the

@@ -28,5 +28,10 @@ class CommandRejectedError(ValueError):
         self.reason = reason
 
 
+class FaultRejectedError(ValueError):
+    """The twin rejected a fault request (unknown kind or target, invalid parameter, unknown
+    id); the message is the twin's reason. Nothing changed."""
+
+
 class ServiceError(RuntimeError):
     """A ``spawn_parts`` or ``reset`` call failed; the message is the twin's."""

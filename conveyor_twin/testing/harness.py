@@ -28,11 +28,13 @@ from conveyor_twin.cell import load_cell
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.testing._layout import density_per_step, Layout, start_layout
 from conveyor_twin.testing.driver import command_result, CommandResult, Driver, TIMEOUT
-from conveyor_twin.testing.errors import (CommandRejectedError, ConditionNotMet, ServiceError,
+from conveyor_twin.testing.errors import (CommandRejectedError, ConditionNotMet,
+                                          FaultRejectedError, ServiceError,
                                           TwinClosedError, TwinTimeoutError)
 from conveyor_twin.testing.processes import RosProcesses
 from conveyor_twin.testing.ros_env import DomainLease, lease_domain_id
 from conveyor_twin.wire import cdr
+from conveyor_twin.wire.fault_state import FaultEntry
 
 DEFAULT_CHUNK = 10      # steps per ``step`` service call: a controller reacts within this many
 DEFAULT_SEED = 0
@@ -118,17 +120,39 @@ class LockstepTwin:
         stream and for the twin's answer to every command, so an attached controller reacts
         within ``chunk`` steps
     :param timeout: longest wait for any one answer of the twin or a controller [s]
-    :raises ValueError: on an unknown layout
+    :param foxglove: ``[HOST:]PORT`` to serve a live Foxglove view of the test's twin at (watch
+        a test step by step); None: no view. Composed: port 0 picks a free one, see
+        :attr:`foxglove`; split: the coordinator process serves it, give a port.
+    :param scenario: a fault scenario file to arm (``docs/faults.md``); checked before the
+        twin starts
+    :raises ValueError: on an unknown layout, an invalid ``foxglove`` address, or port 0 with
+        the split layout
+    :raises conveyor_twin.faults.scenario.ScenarioError: on an invalid scenario file
+    :raises conveyor_twin.viz.foxglove_view.FoxgloveError: if the view cannot listen there
     :raises conveyor_twin.cell.CellError: on an invalid cell file
     """
 
     def __init__(self, cell: Union[None, str, Path, Cell] = None, *, seed: int = DEFAULT_SEED,
                  layout: Layout = 'composed', chunk: int = DEFAULT_CHUNK,
-                 timeout: float = TIMEOUT) -> None:
+                 timeout: float = TIMEOUT, foxglove: Optional[str] = None,
+                 scenario: Union[None, str, Path] = None) -> None:
         if chunk < 1:
             raise ValueError(f'chunk must be at least 1 step (got {chunk})')
+        if foxglove is not None:
+            from conveyor_twin.viz.foxglove_view import FoxgloveError, parse_address
+            try:
+                _, port = parse_address(foxglove)
+            except FoxgloveError as exc:
+                raise ValueError(str(exc)) from None
+            if port == 0 and layout == 'split':
+                raise ValueError('foxglove: the split layout serves the view from its own '
+                                 'process; give a port other than 0')
         cell_file = None if cell is None or isinstance(cell, Cell) else os.fspath(cell)
         self.cell: Cell = cell if isinstance(cell, Cell) else load_cell(cell_file)
+        self.scenario = None
+        if scenario is not None:
+            from conveyor_twin.faults.scenario import load_scenario
+            self.scenario = load_scenario(os.fspath(scenario), self.cell)
         self.seed = seed
         self.layout = layout
         self.chunk = chunk
@@ -156,7 +180,8 @@ class LockstepTwin:
                        signal_handler_options=SignalHandlerOptions.NO)
             self.context = context
             self._running = start_layout(self.cell, cell_file, seed=seed, layout=layout,
-                                         context=self.context, domain_id=self.domain_id)
+                                         context=self.context, domain_id=self.domain_id,
+                                         foxglove=foxglove or '', scenario=self.scenario)
             self._driver = Driver(self.context, density_per_step=density_per_step(self.cell),
                                   name='conveyor_twin_test', timeout=timeout)
             if not self._driver.wait_connected():
@@ -205,6 +230,13 @@ class LockstepTwin:
             if self._lease is not None:
                 self._lease.release()
             shutil.rmtree(self._log_dir, ignore_errors=True)
+
+    @property
+    def foxglove(self) -> Any:
+        """The live :class:`~conveyor_twin.viz.foxglove_view.FoxgloveView` of a composed twin
+        started with ``foxglove=`` (its ``port`` is where it listens), else None."""
+        composed = self.composed
+        return composed.foxglove if composed is not None else None
 
     @property
     def composed(self) -> Any:
@@ -464,6 +496,45 @@ class LockstepTwin:
         if not response.success:
             raise ServiceError(f'spawn_parts refused: {response.message}')
         return np.asarray(response.id, dtype=np.uint32)
+
+    # -- faults --------------------------------------------------------------------------
+    def inject_fault(self, kind: str, target: str = '', *, duration: float = 0.0,
+                     part_type: str = '', **params: float) -> int:
+        """Inject a fault through ``inject_fault``; it takes effect at the next step. Return
+        its id.
+
+        :param kind: a fault kind (``docs/faults.md``), e.g. ``barrier_stuck_blocked``
+        :param target: what it acts on (barrier, belt, actuator, source, stream or command
+            topic name; a part id); empty for ``parts_vanish``
+        :param duration: clear it after this long [s]; 0: until cleared
+        :param part_type: the part type ``source_wrong_type`` delivers
+        :param params: the kind's parameters [SI], e.g. ``frequency=20.0``
+        :raises FaultRejectedError: when the twin refuses (the message is the twin's)
+        """
+        from conveyor_twin_msgs.srv import InjectFault
+        driver = self._check_open(f'inject_fault({kind!r})')
+        response = driver.inject_fault(InjectFault.Request(
+            kind=kind, target=str(target), param_names=list(params),
+            param_values=[float(v) for v in params.values()], duration=float(duration),
+            part_type=part_type))
+        if not response.success:
+            raise FaultRejectedError(response.message)
+        return int(response.id)
+
+    def clear_fault(self, fault_id: int) -> None:
+        """Clear a fault through ``clear_fault``; it takes effect at the next step.
+
+        :raises FaultRejectedError: when no fault of that id is active
+        """
+        response = self._check_open(f'clear_fault({fault_id})').clear_fault(fault_id)
+        if not response.success:
+            raise FaultRejectedError(response.message)
+
+    def active_faults(self) -> Dict[int, FaultEntry]:
+        """Return the active faults by id, as the ``faults`` stream stated them after the last
+        step (a fault injected since takes effect at the next step)."""
+        state = self._check_open('active_faults()').fault_state()
+        return {} if state is None else {f.id: f for f in state.active}
 
     def reset(self, *, seed: Optional[int] = None, cell_file: Union[None, str, Path] = None
               ) -> None:

@@ -7,7 +7,7 @@ from typing import Any, Dict, List, Optional, Sequence
 from rclpy.context import Context
 from rclpy.node import Node
 
-from conveyor_twin.ros.qos import CLOCK_QOS, COMMAND_QOS, EDGE_QOS, STREAM_QOS
+from conveyor_twin.ros.qos import CLOCK_QOS, COMMAND_QOS, EDGE_QOS, LATCHED_QOS, STREAM_QOS
 
 #: The twin's streams a probe listens to by default: ``{topic: (module, type, QoS)}``.
 STREAMS = {
@@ -18,6 +18,7 @@ STREAMS = {
     'belt_states': ('conveyor_twin_msgs.msg', 'BeltStates', STREAM_QOS),
     'actuator_states': ('conveyor_twin_msgs.msg', 'ActuatorStates', STREAM_QOS),
     '/clock': ('rosgraph_msgs.msg', 'Clock', CLOCK_QOS),
+    'faults': ('conveyor_twin_msgs.msg', 'FaultState', LATCHED_QOS),
 }
 #: More topics a probe can listen to: the twin's answer to each command, and the commands of
 #: every controller.

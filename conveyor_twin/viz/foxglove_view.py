@@ -1,14 +1,18 @@
 """A Foxglove WebSocket server in the twin's process (``foxglove-sdk``), fed with the twin's bytes.
 
-The twin hands every message it publishes to :meth:`FoxgloveView.sink` as (absolute topic,
-simulation time [ns], CDR bytes). With no client subscribed that is one attribute test and a
-return. With a client, the sink keeps the latest message of the streams the scene needs and
-appends the forwarded ones to a bounded queue (oldest dropped and counted when full); a
-publisher thread hands them to the SDK, whose per-client backlog is bounded too, so a slow or
-vanished client never stalls the step.
+The view is a sink of the twin's frames (:meth:`FoxgloveView.on_frame`, composed layout) or of
+single messages (:meth:`FoxgloveView.sink`, as (absolute topic, simulation time [ns], CDR
+bytes): the split layout's coordinator, which receives the scale streams over ROS). The ROS side
+feeds it only while a client is subscribed (:attr:`FoxgloveView.on_active` is called when the
+first subscription arrives and when the last one goes), so with no client the step pays
+nothing. With a client, every ``every``-th frame (``stream_rate``) is forwarded whole and the
+others only for their edges and diagnostics; the view keeps the latest message of the streams
+the scene needs and appends the forwarded ones to a bounded queue (oldest dropped and counted
+when full). A publisher thread hands them to the SDK, whose per-client backlog is bounded too,
+so a slow or vanished client never stalls the step.
 
 Channels: every contract stream under its ROS topic name, ``cdr`` encoding, ``ros2msg`` schema
-(per-step streams forwarded at ``stream_rate``, edges and diagnostics every one); ``scene``
+(per-step streams forwarded at ``stream_rate``, edges, diagnostics and markers every one); ``scene``
 (``visualization_msgs/MarkerArray``: belts, walls, deflectors, pegs, actuators at their current
 position, light barriers red while blocked, parts with their shapes) and ``scene/density/ZONE``
 (``foxglove.Grid``: the macro density) built by a scene thread at ``scene_rate``, off the
@@ -29,9 +33,11 @@ from typing import Callable, Deque, Dict, List, Optional, Tuple
 
 import numpy as np
 
+from conveyor_twin import contract as streams_contract
 from conveyor_twin.cell.model import Cell
-from conveyor_twin.record import topics as contract
+from conveyor_twin.output.frame import Frame
 from conveyor_twin.output.markers import CellMarkers
+from conveyor_twin.record import topics as contract
 from conveyor_twin.wire import cdr, schemas
 
 DEFAULT_HOST = '127.0.0.1'
@@ -47,7 +53,9 @@ PUBLISH_PERIOD = 0.01
 SCENE_TOPIC = 'scene'
 DENSITY_GRID_TOPIC = 'scene/density'
 #: Streams sent every message (events and slow streams); the others at ``stream_rate``.
-EVERY_MESSAGE = frozenset(('light_barrier_edges', 'diagnostics', 'markers'))
+EVERY_MESSAGE = frozenset(('light_barrier_edges', 'diagnostics', 'markers', 'faults'))
+#: Streams whose latest message the scene is drawn from.
+SCENE_STREAMS = frozenset(('parts', 'light_barriers', 'actuator_states'))
 COMMAND_TOPICS = {'belt_command': 'belt', 'actuator_command': 'actuator'}
 
 CommandHook = Callable[[str, str, float], Optional[str]]
@@ -121,6 +129,11 @@ class FoxgloveView:
         self.scene_period = 1.0 / scene_rate
         self.backlog = backlog
         every = max(1, int(round(1.0 / (stream_rate * step_s))))
+        #: Frames forwarded whole: one in ``every`` [1].
+        self.every = every
+        self._frames = 0
+        self._names = {topic: contract.resolve(topic.name, namespace)
+                       for topic in streams_contract.STREAMS}
         self._every = {topic: 1 if contract.relative(topic, namespace) in EVERY_MESSAGE
                        else every for topic in self.streams}
         self._count = {topic: 0 for topic in self.streams}
@@ -129,6 +142,9 @@ class FoxgloveView:
         self._density: Dict[str, Tuple[int, bytes]] = {}
         self._rel = {topic: contract.relative(topic, namespace) for topic in self.streams}
         self.active = False          # a client is subscribed to something
+        #: Called with True when the first client subscription arrives and with False when
+        #: the last one goes (the ROS side starts and stops feeding the view).
+        self.on_active: Callable[[bool], None] = lambda active: None
         self.dropped = 0             # messages dropped from the full queue
         self.rejected = 0            # client messages refused (invalid command, bad payload)
         self.last_rejection = ''
@@ -148,26 +164,64 @@ class FoxgloveView:
         self.channels: Dict[str, object] = {}
 
     # -- the step side ---------------------------------------------------------------------
+    def on_frame(self, frame: Frame) -> None:
+        """Take the step's frame (stepping thread: cheap, never blocks).
+
+        One frame in :attr:`every` is forwarded whole; of the others only the edges, the
+        diagnostics and the fault state. Bytes are kept, not copied (the twin builds new bytes
+        every step).
+        """
+        n = self._frames
+        self._frames = n + 1
+        names = self._names
+        if n % self.every:
+            for stamp, data in frame.edges:
+                self._enqueue(names[streams_contract.LIGHT_BARRIER_EDGES], stamp, data)
+            if frame.diagnostics is not None:
+                self._enqueue(names[streams_contract.DIAGNOSTICS], frame.time_ns,
+                              frame.diagnostics)
+            if frame.faults is not None:
+                self._enqueue(names[streams_contract.FAULTS], frame.time_ns, frame.faults)
+            return
+        for topic, stamp_ns, data in frame.messages():
+            self._keep(topic.name, stamp_ns, data)
+            self._enqueue(names[topic], stamp_ns, data)
+
+    def on_message(self, topic: streams_contract.Topic, stamp_ns: int, data: bytes) -> None:
+        """Take a message emitted off the step (``markers``)."""
+        name = self._names.get(topic)
+        if name is not None and self.active:
+            self._enqueue(name, stamp_ns, data)
+
     def sink(self, topic: str, stamp_ns: int, data: bytes) -> None:
-        """Take one message the twin published (stepping thread: cheap, never blocks).
+        """Take one message of a stream (cheap, never blocks); per-step streams are thinned
+        to ``stream_rate`` by counting their messages.
 
         :param topic: absolute topic name.
         :param stamp_ns: simulation time of the message [ns].
-        :param data: its CDR bytes (kept, not copied: the twin builds new bytes every step).
+        :param data: its CDR bytes (kept, not copied).
         """
         if not self.active:
             return
         rel = self._rel.get(topic)
         if rel is None:
             return
-        if rel == 'density':
-            self._density[_density_zone(data)] = (stamp_ns, data)
-        elif rel in ('parts', 'light_barriers', 'actuator_states'):
-            self._latest[rel] = (stamp_ns, data)
         n = self._count[topic]
         self._count[topic] = n + 1
         if n % self._every[topic]:
             return
+        self._keep(rel, stamp_ns, data)
+        self._enqueue(topic, stamp_ns, data)
+
+    def _keep(self, rel: str, stamp_ns: int, data: bytes) -> None:
+        """Keep the latest message of the streams the scene is drawn from."""
+        if rel == 'density':
+            self._density[_density_zone(data)] = (stamp_ns, data)
+        elif rel in SCENE_STREAMS:
+            self._latest[rel] = (stamp_ns, data)
+
+    def _enqueue(self, topic: str, stamp_ns: int, data: bytes) -> None:
+        """Queue a message for the publisher thread; drop the oldest when the queue is full."""
         if len(self._queue) >= self.backlog:
             self._queue.popleft()
             self.dropped += 1
@@ -299,9 +353,13 @@ class FoxgloveView:
             else:
                 self._subscriptions.pop(key, None)
             active = bool(self._subscriptions)
-            if active and not self.active:
+            changed = active != self.active
+            if active and changed:
                 self._queue.clear()
+                self._frames = 0
             self.active = active
+            if changed:  # under the lock: the ROS side sees the changes in order
+                self.on_active(active)
 
     def _advertised(self, key: Tuple[int, int], topic: str, encoding: str) -> None:
         self._client_channels[key] = (contract.relative(topic, self.namespace), encoding)

@@ -70,6 +70,26 @@ _LIGHTBARRIEREDGE = (
 )
 
 #: Request part of ``srv/SpawnParts`` (recorded as the accepted ``spawn_parts`` calls).
+_FAULTSTATE = (
+    '# The active faults, sent whenever they change (latched: a late joiner gets the latest).\n'
+    '\n'
+    'std_msgs/Header header      # stamp: simulation time from which this set is in effect\n'
+    'uint32[] id                 # one entry per active fault: its id (unique in a run)\n'
+    'string[] kind               # fault kind (docs/faults.md)\n'
+    'string[] target             # what it acts on (barrier, belt, actuator, source, stream, ...)\n'
+    'uint32[] param_count        # number of parameters of each fault, in order\n'
+    'string[] param_name         # all parameters, fault after fault\n'
+    'float64[] param_value       # their values [SI]\n'
+    'string[] part_type          # part type of source_wrong_type; empty otherwise\n'
+    'float64[] duration          # cleared after this long [s]; 0: until cleared\n'
+    'float64[] since             # simulation time it became active [s]\n'
+    'uint32[] injected           # ids injected at this stamp\n'
+    'uint32[] cleared            # ids cleared at this stamp\n'
+    'string[] cleared_reason     # why each was cleared: request, expired, scenario\n'
+    'uint32 total_injected       # faults injected since the start\n'
+    'uint32 total_rejected       # fault requests rejected since the start\n'
+)
+
 _SPAWNPARTS_REQUEST = (
     'string part_type    # part type name from the cell description\n'
     "float64[] x         # cell-frame x of each part's centre of mass [m]\n"
@@ -417,6 +437,7 @@ MSG_TEXTS: Dict[str, str] = {
     'conveyor_twin_msgs/msg/BeltStates': _BELTSTATES,
     'conveyor_twin_msgs/msg/ActuatorCommand': _ACTUATORCOMMAND,
     'conveyor_twin_msgs/msg/ActuatorStates': _ACTUATORSTATES,
+    'conveyor_twin_msgs/msg/FaultState': _FAULTSTATE,
     'conveyor_twin_msgs/srv/SpawnParts_Request': _SPAWNPARTS_REQUEST,
     'conveyor_twin_msgs/srv/Reset_Request': _RESET_REQUEST,
     'std_msgs/msg/Header': _HEADER,

@@ -124,7 +124,7 @@ def test_the_frame_bytes_are_those_of_the_encoders():
 @pytest.mark.parametrize('part', ['coordinator', 'micro', 'macro'])
 def test_each_stage_part_alone_equals_its_part_of_the_full_frame(part):
     """Split layout: a process's output carries its stage's streams only, byte for byte."""
-    fields = {'coordinator': ('clock', 'belt_states', 'actuator_states', 'diagnostics'),
+    fields = {'coordinator': ('clock', 'belt_states', 'actuator_states', 'diagnostics', 'faults'),
               'micro': ('parts', 'light_barriers', 'edges'), 'macro': ('density',)}
     cell = _cell()
     twin, micro, macro, full = _twin(cell)

@@ -56,6 +56,15 @@ CONTRACT_MSGS: Dict[str, List[Tuple[str, str]]] = {
         ('header', 'std_msgs/Header'), ('name', 'string[]'),
         ('commanded_position', 'float64[]'), ('position', 'float64[]'),
     ],
+    # the faults interface (docs/faults.md), beyond architecture.md's list
+    'FaultState': [
+        ('header', 'std_msgs/Header'), ('id', 'uint32[]'), ('kind', 'string[]'),
+        ('target', 'string[]'), ('param_count', 'uint32[]'), ('param_name', 'string[]'),
+        ('param_value', 'float64[]'), ('part_type', 'string[]'), ('duration', 'float64[]'),
+        ('since', 'float64[]'), ('injected', 'uint32[]'), ('cleared', 'uint32[]'),
+        ('cleared_reason', 'string[]'), ('total_injected', 'uint32'),
+        ('total_rejected', 'uint32'),
+    ],
 }
 CONTRACT_SRVS: Dict[str, Tuple[List[Tuple[str, str]], List[Tuple[str, str]]]] = {
     'Step': (
@@ -69,6 +78,15 @@ CONTRACT_SRVS: Dict[str, Tuple[List[Tuple[str, str]], List[Tuple[str, str]]]] = 
     'SpawnParts': (
         [('part_type', 'string'), ('x', 'float64[]'), ('y', 'float64[]'), ('yaw', 'float64[]')],
         [('success', 'bool'), ('message', 'string'), ('id', 'uint32[]')],
+    ),
+    'InjectFault': (
+        [('kind', 'string'), ('target', 'string'), ('param_names', 'string[]'),
+         ('param_values', 'float64[]'), ('duration', 'float64'), ('part_type', 'string')],
+        [('success', 'bool'), ('message', 'string'), ('id', 'uint32')],
+    ),
+    'ClearFault': (
+        [('id', 'uint32')],
+        [('success', 'bool'), ('message', 'string')],
     ),
 }
 

@@ -10,7 +10,7 @@ from conveyor_twin.testing import Driver
 pytestmark = pytest.mark.ros
 NODES = ('/scale_coordinator', '/micro_simulator', '/macro_simulator')
 DECLARED = {'cell_file', 'seed', 'mode', 'markers_rate', 'duration', 'namespace',
-            'stream_rate', 'diagnostics_rate'}
+            'stream_rate', 'diagnostics_rate', 'foxglove'}
 
 
 def check_parameters(driver: Driver, node: str, *, seed: int, mode: str,
@@ -28,6 +28,7 @@ def check_parameters(driver: Driver, node: str, *, seed: int, mode: str,
     assert params['namespace'][0] == namespace
     assert params['stream_rate'][0] == pytest.approx(1000.0)
     assert params['diagnostics_rate'][0] == pytest.approx(1.0)
+    assert params['foxglove'][0] == ''  # no live view unless asked for
 
 
 def test_composed_nodes_declare_their_parameters(ros_context):

@@ -1,0 +1,143 @@
+"""Faults of drives and command paths, applied by the coordinator core (no ROS imports).
+
+Commands: ``command_drop``/``command_delay`` act on a whole command topic, ``*_ignore_commands``
+and ``*_delay_commands`` on one belt or actuator; they filter the commands drained at a step
+(what was received is still what is recorded, so a re-simulation applies the same faults to the
+same commands). Drives: ``belt_stall`` holds the drive at 0 (it ramps up again from 0 once
+cleared), ``actuator_stuck``/``actuator_slow`` scale the actuator's rate limit; ``belt_slip``,
+``belt_speed_noise`` and ``actuator_offset`` change what the stages get (and what
+``belt_states``/``actuator_states`` report as actual) without touching the drive's state.
+"""
+
+import dataclasses
+from typing import Any, Dict, List, Sequence, Tuple
+
+import numpy as np
+
+from conveyor_twin.cell.model import Cell
+from conveyor_twin.faults.book import CLEAR, fault_rng, FaultEvent, steps_of
+from conveyor_twin.faults.model import ActiveFault
+
+# the coordinator's command kinds (``Command.kind``)
+BELT = 'belt'
+ACTUATOR = 'actuator'
+_TOPIC_KIND = {'belt_command': BELT, 'actuator_command': ACTUATOR}
+Command = Any  # conveyor_twin.coord.commands.Command (the coordinator sits above this layer)
+Actuation = Any  # conveyor_twin.coord.actuation.Actuation
+_COMMAND_FAULTS = ('command_drop', 'command_delay', 'belt_ignore_commands',
+                   'belt_delay_commands', 'actuator_ignore_commands', 'actuator_delay_commands')
+_DRIVE_FAULTS = ('belt_stall', 'belt_slip', 'belt_speed_noise', 'actuator_stuck',
+                 'actuator_slow', 'actuator_offset')
+
+
+class ActuationFaults:
+    """The command and drive faults active in the coordinator.
+
+    :param cell: the cell. :param seed: the run's seed (random faults draw from it).
+    """
+
+    def __init__(self, cell: Cell, seed: int) -> None:
+        self.cell = cell
+        self.seed = seed
+        self.dt = cell.settings.step
+        self.faults: Dict[int, ActiveFault] = {}
+        self._rng: Dict[int, np.random.Generator] = {}
+        self._delayed: Dict[int, List[Command]] = {}  # step -> commands due then
+        self._low = np.array([a.position_range[0] for a in cell.actuators], dtype=np.float64)
+        self._high = np.array([a.position_range[1] for a in cell.actuators], dtype=np.float64)
+        self._rate = np.ones(len(cell.actuators))
+        self.dropped = 0   # commands lost to faults
+        self.delayed = 0   # commands delayed by faults
+
+    @property
+    def busy(self) -> bool:
+        """True while a fault is active or a delayed command is waiting."""
+        return bool(self.faults or self._delayed)
+
+    def apply(self, events: Sequence[FaultEvent], actuation: Actuation) -> None:
+        """Take the step's events (those of other stages are ignored)."""
+        for event in events:
+            fault = event.fault
+            if fault.kind not in _COMMAND_FAULTS and fault.kind not in _DRIVE_FAULTS:
+                continue
+            if event.action == CLEAR:
+                self.faults.pop(fault.id, None)
+                self._rng.pop(fault.id, None)
+            else:
+                self.faults[fault.id] = fault
+                self._rng[fault.id] = fault_rng(self.seed, fault.id)
+        if events:  # actuator rate limits: the active factors
+            self._rate[:] = 1.0
+            for fault in self.faults.values():
+                if fault.kind == 'actuator_stuck':
+                    self._rate[fault.index] = 0.0
+                elif fault.kind == 'actuator_slow':
+                    self._rate[fault.index] *= fault.param('factor')
+            actuation.set_actuator_rate_factors(self._rate)
+
+    def filter_commands(self, commands: List[Command], step: int) -> List[Command]:
+        """Return the commands that take effect at ``step``: the drained ones that no fault
+        drops, ignores or delays, then delayed ones that are due (stamped with ``step``)."""
+        due = self._delayed.pop(step, [])
+        if not self.faults:
+            return commands + [_at(c, step) for c in due] if due else commands
+        out = []
+        for command in commands:
+            delay = 0
+            lost = False
+            for fault in self.faults.values():
+                kind = fault.kind
+                if kind in ('command_drop', 'command_delay'):
+                    if _TOPIC_KIND[fault.target] != command.kind:
+                        continue
+                    if kind == 'command_drop':
+                        lost |= bool(self._rng[fault.id].random() < fault.param('probability'))
+                    else:
+                        delay = max(delay, steps_of(fault.param('delay'), self.dt))
+                elif (kind.startswith('belt_') and command.kind == BELT
+                      or kind.startswith('actuator_') and command.kind == ACTUATOR) \
+                        and fault.index == command.index:
+                    if kind.endswith('_ignore_commands'):
+                        lost = True
+                    elif kind.endswith('_delay_commands'):
+                        delay = max(delay, steps_of(fault.param('delay'), self.dt))
+            if lost:
+                self.dropped += 1
+            elif delay:
+                self.delayed += 1
+                self._delayed.setdefault(step + delay, []).append(command)
+            else:
+                out.append(command)
+        return out + [_at(c, step) for c in due]
+
+    def drive(self, actuation: Actuation) -> Tuple[np.ndarray, np.ndarray]:
+        """Return the belt speeds [m/s] and actuator positions the stages get this step (after
+        :meth:`Actuation.advance`); a stalled belt's drive is held at 0."""
+        belt = actuation.belt_speed.copy()
+        position = actuation.actuator_position.copy()
+        for fault in self.faults.values():
+            kind = fault.kind
+            if kind == 'belt_stall':
+                actuation.belt_speed[fault.index] = 0.0
+                belt[fault.index] = 0.0
+        for fault in self.faults.values():
+            kind = fault.kind
+            if kind == 'belt_slip':
+                belt[fault.index] *= fault.param('factor')
+            elif kind == 'belt_speed_noise':
+                belt[fault.index] += fault.param('sigma') * self._rng[fault.id].standard_normal()
+            elif kind == 'actuator_offset':
+                i = fault.index
+                position[i] = min(max(position[i] + fault.param('offset'), self._low[i]),
+                                  self._high[i])
+        return belt, position
+
+    def reset(self) -> None:
+        """Forget every fault and delayed command (counters are kept)."""
+        self.faults.clear()
+        self._rng.clear()
+        self._delayed.clear()
+
+
+def _at(command: Command, step: int) -> Command:
+    return dataclasses.replace(command, step=step)
