@@ -355,7 +355,7 @@ def _line(gap: str, entry: Dict) -> str:
 
 LITERATURE = ('literature (To, Lai and Pak; Janda et al.; Zuriguel et al.): the probability of '
               'a clog falls steeply as the opening grows, in 2D hoppers from near 1 to near 0 '
-              'over about 3-5 diameters')
+              'over a narrow range of openings of a few diameters')
 
 
 def main(argv: List[str]) -> int:
