@@ -44,20 +44,22 @@ class BarrierFaults:
         self._rng = {}
         self._reported = np.zeros(self.n, dtype=bool)
         self._offset = np.zeros(self.n, dtype=np.int64)  # reported - true edge count
+        self._counts_differ = False  # _offset has a non-zero entry
         self._delayed: List[Tuple[int, int, bool, int, int]] = []  # due, b, blocked, t, id
         self._released = np.zeros(self.n, dtype=bool)  # cleared this step: report truth
+        self._any_released = False
         self.dropped = 0
 
     @property
     def busy(self) -> bool:
         """True while a barrier fault is active or has just been cleared (:meth:`filter` must
         run); otherwise only the edge counters may differ (:meth:`count`)."""
-        return bool(self.faults) or bool(self._released.any())
+        return bool(self.faults) or self._any_released
 
     def count(self, count: np.ndarray) -> np.ndarray:
         """Return the reported edge counters of true ``count`` (edges added or lost by faults
         stay counted after they are cleared)."""
-        if not self._offset.any():
+        if not self._counts_differ:
             return count
         return (count.astype(np.int64) + self._offset).astype(count.dtype)
 
@@ -73,6 +75,7 @@ class BarrierFaults:
                 if current is not None and current[0].id == fault.id:
                     del self.faults[b]
                     self._released[b] = True
+                    self._any_released = True
                     self._delayed = [d for d in self._delayed if d[1] != b]
                 continue
             if current is None:
@@ -126,10 +129,12 @@ class BarrierFaults:
                 extra.append((int(b), bool(blocked[b]), time_ns, 0))
             self._reported[b] = blocked[b]
         self._released[:] = False
+        self._any_released = False
         # edge counter: reported = true + offset
         lost = np.bincount(bar[~keep], minlength=self.n) if len(bar) else 0
         added = np.bincount([e[0] for e in extra], minlength=self.n) if extra else 0
         self._offset += added - lost
+        self._counts_differ = bool(self._offset.any())
         out_count = self.count(count)
         if extra or not keep.all():
             bar = np.concatenate([bar[keep], np.array([e[0] for e in extra], dtype=bar.dtype)])

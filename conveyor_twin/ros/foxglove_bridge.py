@@ -26,6 +26,7 @@ from conveyor_twin.viz.foxglove_view import (DEFAULT_BACKLOG, DEFAULT_SCENE_RATE
                                              DEFAULT_STREAM_RATE, FoxgloveView,
                                              parse_address, ServiceSpec)
 from conveyor_twin.wire import schemas
+from conveyor_twin.wire.cdr import stamp_of
 
 _TIME = (f"\n{schemas.SEPARATOR}\nMSG: builtin_interfaces/Time\n"
          + schemas.MSG_TEXTS['builtin_interfaces/msg/Time'])
@@ -124,15 +125,9 @@ class ScaleStreams:
         name = resolve(topic.name, self.node.get_namespace())
         sink = self.view.sink
         if topic.stamp is contract.Stamp.HEADER:
-            return lambda data: sink(name, _header_stamp_ns(data), data)
+            return lambda data: sink(name, stamp_of(data), data)
         output = self.node.output
         return lambda data: sink(name, output.frame.time_ns, data)
-
-
-def _header_stamp_ns(data: bytes) -> int:
-    """Return the stamp of a CDR message whose first field is a Time or Header [ns]."""
-    return int.from_bytes(data[4:8], 'little') * 1_000_000_000 + int.from_bytes(data[8:12],
-                                                                                  'little')
 
 
 def _view(coordinator: Any, twin: Any, cell: Any, **rates: Any) -> FoxgloveView:

@@ -55,12 +55,6 @@ def _command_key(topic: str, target: str, value: float) -> tuple:
     return topic, target.split('\x00', 1)[0], repr(float(value))
 
 
-def _stamp_ns(data: bytes) -> int:
-    """Return the stamp of a CDR message whose first field is a Time or Header [ns]."""
-    return int.from_bytes(data[4:8], 'little') * 1_000_000_000 + int.from_bytes(data[8:12],
-                                                                                  'little')
-
-
 class Driver:
     """A probe, clients and command publishers in one executor, against a twin's namespace.
 
@@ -80,6 +74,7 @@ class Driver:
         self.step_client = self.probe.create_client(Step, 'step')
         self.spawn_client = self.probe.create_client(SpawnParts, 'spawn_parts')
         self.reset_client = self.probe.create_client(Reset, 'reset')
+        self._fault_state: tuple = (None, None)  # (latest faults message, decoded)
         self.inject_client = self.probe.create_client(InjectFault, 'inject_fault')
         self.clear_client = self.probe.create_client(ClearFault, 'clear_fault')
         self.belt_pub = self.probe.create_publisher(BeltCommand, 'belt_command', COMMAND_QOS)
@@ -137,14 +132,19 @@ class Driver:
         for topic in EVERY_STEP:
             if topic not in silent:
                 messages = received[topic]
-                if not messages or _stamp_ns(messages[-1]) < want_ns:
+                if not messages or cdr.stamp_of(messages[-1]) < want_ns:
                     return False
         return 'density' in silent or len(received['density']) >= want_density
 
     def fault_state(self) -> Optional[FaultStateData]:
-        """Return the latest ``faults`` message received, decoded (None before the first)."""
+        """Return the latest ``faults`` message received, decoded (None before the first;
+        decoded once per message, not on every poll of a wait)."""
         messages = self.probe.received['faults']
-        return decode_fault_state(messages[-1]) if messages else None
+        if not messages:
+            return None
+        if self._fault_state[0] is not messages[-1]:
+            self._fault_state = (messages[-1], decode_fault_state(messages[-1]))
+        return self._fault_state[1]
 
     def silenced(self) -> set:
         """Return the streams a ``stream_outage`` fault silences, as the latest fault state

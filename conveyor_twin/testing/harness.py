@@ -103,11 +103,6 @@ class CommandRecord(NamedTuple):
     result: CommandResult
 
 
-def _stamp_ns(data: bytes) -> int:
-    """Return the header stamp of a CDR message whose first field is a std_msgs/Header [ns]."""
-    return int.from_bytes(data[4:8], 'little') * 10**9 + int.from_bytes(data[8:12], 'little')
-
-
 class LockstepTwin:
     """A twin in lockstep, started for a test; a context manager.
 
@@ -349,7 +344,7 @@ class LockstepTwin:
             if name not in msg.name:
                 raise KeyError(f'unknown belt {name!r} (known: {", ".join(msg.name)})')
             i = list(msg.name).index(name)
-            out.append(BeltSample(_stamp_ns(data), msg.commanded_speed[i], msg.speed[i]))
+            out.append(BeltSample(cdr.stamp_of(data), msg.commanded_speed[i], msg.speed[i]))
         return out
 
     def actuators(self) -> Dict[str, ActuatorState]:

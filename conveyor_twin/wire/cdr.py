@@ -40,6 +40,13 @@ class CdrError(ValueError):
     """Raised for malformed CDR data or arguments that cannot be encoded."""
 
 
+def stamp_of(data: bytes) -> int:
+    """Return the stamp [ns] of little-endian CDR bytes whose first field is a
+    ``builtin_interfaces/Time`` or a ``std_msgs/Header`` (every stamped stream of the twin)."""
+    return (int.from_bytes(data[4:8], 'little') * NS_PER_S
+            + int.from_bytes(data[8:12], 'little'))
+
+
 def stamp_parts(stamp_ns: int) -> Tuple[int, int]:
     """Split a time into ``(sec, nanosec)`` of ``builtin_interfaces/Time``, exactly.
 
