@@ -1,9 +1,16 @@
-"""examples/stop_on_fault.py against a lockstep twin with injected faults (public API only)."""
+"""examples/stop_on_fault.py against a lockstep twin with injected faults (public API only).
 
+The timed tests attach the watchdog in the test process (``add_node``): the harness lets it
+react at every chunk, so its reaction time is exact whatever the load. As its own process it
+reads the 1 kHz ``light_barriers`` stream at its own pace; the last test runs it that way.
+"""
+
+import importlib.util
 from pathlib import Path
 import sys
 
 import pytest
+from rclpy.parameter import Parameter
 
 from conveyor_twin.testing import FaultRejectedError, quiet_cell
 
@@ -11,6 +18,14 @@ pytestmark = pytest.mark.ros
 EXAMPLE = Path(__file__).resolve().parents[2] / 'examples' / 'stop_on_fault.py'
 CHUNK = 5          # steps per step call: the controller reacts within this many
 MS = 1_000_000     # [ns]
+
+
+def _attach(twin) -> None:
+    spec = importlib.util.spec_from_file_location('stop_on_fault', EXAMPLE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    twin.add_node(module.StopOnFault(context=twin.context, parameter_overrides=[
+        Parameter('barrier', value='lb_exit'), Parameter('timeout', value=0.5)]))
 
 
 def _start(twin) -> None:
@@ -26,7 +41,7 @@ def _stops(twin) -> list:
 
 def test_a_stuck_barrier_stops_the_belt_after_the_timeout(conveyor_twin_factory):
     twin = conveyor_twin_factory(quiet_cell(), seed=3, chunk=CHUNK)
-    _start(twin)
+    _attach(twin)
     twin.step(200)
     fault = twin.inject_fault('barrier_stuck_blocked', 'lb_exit')
     twin.step(1)
@@ -48,7 +63,7 @@ def test_a_stuck_barrier_stops_the_belt_after_the_timeout(conveyor_twin_factory)
 
 def test_a_jammed_part_in_the_beam_stops_the_belt(conveyor_twin_factory):
     twin = conveyor_twin_factory(quiet_cell(), seed=3, chunk=CHUNK)
-    _start(twin)
+    _attach(twin)
     [part] = twin.spawn('spacer', [5.3], [0.0])  # upstream of lb_exit
     twin.step_until(lambda: twin.barrier('lb_exit').blocked, max_steps=5000,
                     what='the part reaches lb_exit')
