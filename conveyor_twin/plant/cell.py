@@ -1,0 +1,158 @@
+"""One cell of a plant: its twin, the exits and entries of its links, plant-wide ids.
+
+:class:`PlantCellCore` steps a composed twin (:func:`~conveyor_twin.coord.assembly.build_twin`)
+and, around each step ``s``:
+
+1. before the physics, every entry (links in plant order) inserts the parts due at ``s``
+   (left upstream at ``s - delay`` or earlier), in order, each where it does not overlap
+   anything; the first that does not fit waits with all behind it;
+2. the twin steps;
+3. after the physics, every exit takes the parts whose centre is in its rectangle (ids
+   ascending), as many as the link has room for; they leave the cell as hand-overs (the
+   micro ledger's ``handed_over``) and travel with their pose relative to the link.
+
+Ids: cell ``k`` numbers its parts from ``k * 2**24 + 1`` (:data:`~conveyor_twin.plant.model.
+ID_RANGE`), so ids are unique plant-wide at every instant; a part entering from a link gets
+the next id of its new cell, and the link carries the id it had upstream and its ``origin``
+(its id where it entered the plant), which a cell keeps for the parts it received.
+"""
+
+import hashlib
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from conveyor_twin.coord.assembly import AssembledTwin, build_twin
+from conveyor_twin.micro.state import C_NEXT_ID, C_REGION_LEFT, C_REMOVED, PT_BRAD
+from conveyor_twin.plant.geometry import entry_pose, inside, to_link
+from conveyor_twin.plant.link import LinkEntry, LinkExit, Transit
+from conveyor_twin.plant.model import ID_RANGE, Plant, PlantCell
+from conveyor_twin.plant.sync import horizon
+
+
+class PlantCellCore:
+    """A cell of a plant with the ends of its links.
+
+    :param plant: the validated plant. :param name: the cell's name in it.
+    :param run: id of this run of the cell (reported to upstream cells; a restarted cell
+        process takes another so they send again what it never inserted).
+    :param check_balance: check the cell's part ledger every step (see ``build_twin``).
+    """
+
+    def __init__(self, plant: Plant, name: str, *, run: int = 0,
+                 check_balance: Optional[bool] = None) -> None:
+        self.plant = plant
+        self.spec: PlantCell = plant.cell(name)
+        self.name = name
+        self.twin: AssembledTwin = build_twin(self.spec.cell, seed=self.spec.seed,
+                                              check_balance=check_balance)
+        sim = self.twin.micro.sim
+        sim.state.counters[C_NEXT_ID] = self.spec.index * ID_RANGE + 1
+        self.exits: List[LinkExit] = [LinkExit(k) for k in plant.links_from(name)]
+        self.entries: List[LinkEntry] = [LinkEntry(k, run) for k in plant.links_to(name)]
+        self._radius = sim.pt[:, PT_BRAD].copy()  # bounding radius per part type [m]
+        self._origin: Dict[int, int] = {}
+        self._digest = hashlib.sha256()
+        #: Parts due and waiting at the entries after the last step, per entry.
+        self.waiting = [0] * len(self.entries)
+
+    @property
+    def step_index(self) -> int:
+        """Steps completed."""
+        return self.twin.twin.step_index
+
+    def horizon(self) -> int:
+        """The last step this cell may compute now (:func:`~conveyor_twin.plant.sync.horizon`)."""
+        return horizon(self.entries, self.exits)
+
+    def may_step(self) -> bool:
+        """True if the next step may be computed with what the neighbours reported."""
+        return self.step_index + 1 <= self.horizon()
+
+    def step(self) -> None:
+        """Compute the next step: entries, physics, exits (see the module docstring).
+
+        :raises RuntimeError: if the neighbours have not reported far enough.
+        """
+        s = self.step_index + 1
+        if s > self.horizon():
+            raise RuntimeError(f'cell {self.name!r} may not compute step {s} yet '
+                               f'(neighbours allow up to {self.horizon()})')
+        sim = self.twin.micro.sim
+        for k, entry in enumerate(self.entries):
+            if entry.queue:
+                link = entry.link
+
+                def place(part: Transit, link=link) -> int:
+                    t = link.type_map[part.part_type]
+                    x, y, yaw, vx, vy = entry_pose(link.entry, float(self._radius[t]), part.y,
+                                                   part.yaw, part.vx, part.vy)
+                    new = sim.place_one(t, x, y, yaw, vx, vy, part.wz)
+                    if new:
+                        self._origin[new] = part.origin
+                    return new
+                self.waiting[k] = entry.insert(s, place)[1]
+            else:
+                self.waiting[k] = 0
+        self.twin.step(1)
+        for x in self.exits:
+            self._take(x, s)
+        for end in self.entries:
+            end.through = s
+        for end in self.exits:
+            end.through = s
+
+    def _take(self, x: LinkExit, s: int) -> None:
+        sim = self.twin.micro.sim
+        n = sim.n
+        if not n:
+            return
+        st = sim.state
+        mask = inside(x.link.exit, st.P[0, :n], st.P[1, :n])
+        if not mask.any():
+            return
+        room = x.room(s)
+        if room <= 0:
+            return
+        if room < n:
+            idx = np.flatnonzero(mask)
+            if idx.size > room:
+                mask[idx[room:]] = False
+        view = sim.remove(mask=mask)
+        k = len(view.id)
+        st.counters[C_REMOVED] -= k      # handed over to the link, not removed
+        st.counters[C_REGION_LEFT] += k
+        lx, ly, lyaw, lvx, lvy = to_link(x.link.exit, view.x, view.y, view.yaw, view.vx,
+                                         view.vy)
+        for i in range(k):
+            pid = int(view.id[i])
+            part = Transit(x.sent, s, pid, self._origin.pop(pid, pid), int(view.part_type[i]),
+                           float(lx[i]), float(ly[i]), float(lyaw[i]), float(lvx[i]),
+                           float(lvy[i]), float(view.wz[i]))
+            self._digest.update(repr(part).encode())
+            x.add(part)
+
+    def counts(self) -> Dict[str, float]:
+        """Return the cell's part ledger [parts]: ``entered`` (sources and spawns, not link
+        arrivals), ``in_cell``, ``left`` (through sinks), ``vanished``, ``sent`` (into links),
+        ``inserted`` (from links)."""
+        coupling = self.twin.coupling
+        if coupling is not None and coupling.enabled:
+            led = coupling.ledger()
+            total = led['entered']
+            in_cell = led['micro'] + led['macro'] + led['pending']
+            left, vanished = led['left'], led['vanished']
+        else:
+            c = self.twin.micro.sim.counters()
+            total, in_cell = float(c['entered']), float(c['in_flight'])
+            left, vanished = float(c['left']), float(c['vanished'])
+        inserted = float(sum(e.inserted for e in self.entries))
+        return {'entered': total - inserted, 'in_cell': in_cell, 'left': left,
+                'vanished': vanished, 'sent': float(sum(x.sent for x in self.exits)),
+                'inserted': inserted}
+
+    def state_hash(self) -> str:
+        """Return a SHA-256 digest of the cell's micro state and of every part it sent."""
+        h = self._digest.copy()
+        h.update(self.twin.micro.sim.state_bytes())
+        return h.hexdigest()
