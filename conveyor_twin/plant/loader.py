@@ -41,6 +41,11 @@ _NAME_EXPECTED = 'a name of letters, digits and _ starting with a letter (a ROS 
 class _PlantReader(_Reader):
     """The cell loader's key reader, raising :class:`PlantError`."""
 
+    def __init__(self, file: str, path: str, data: Any) -> None:
+        if not isinstance(data, dict):
+            raise PlantError(file, path or '<top level>', data, 'a mapping of keys to values')
+        super().__init__(file, path, data)
+
     def fail(self, key: Union[str, int], value: Any, expected: str) -> PlantError:
         return PlantError(self.file, self.key_path(key), value, expected)
 
