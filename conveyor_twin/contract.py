@@ -46,6 +46,9 @@ SLOW_QOS = OfferedQos(depth=10)
 #: The active faults, sent on change: latched (transient local), so a late joiner gets the
 #: latest states (the last is the current set); deep enough that a burst of changes is not lost.
 LATCHED_QOS = OfferedQos(depth=100, durability='transient_local')
+#: The links of a plant and the cells' progress: reliable, keep-all, so no batch of parts and
+#: no report is ever dropped from the history (docs/plant.md).
+PLANT_QOS = OfferedQos(history='keep_all', depth=1000)
 
 
 class Kind(str, enum.Enum):
@@ -77,6 +80,7 @@ class Rate(str, enum.Enum):
     DIAGNOSTICS = 'every DIAGNOSTICS_PERIOD_STEPS steps'
     VIEWER = 'viewer rate (markers_rate), built off the stepping thread'
     ON_DEMAND = 'when a controller sends or calls'
+    SYNC = 'every sync period of a plant, and whenever a cell waits for its neighbours'
 
 
 class Producer(str, enum.Enum):
@@ -85,6 +89,7 @@ class Producer(str, enum.Enum):
     COORDINATOR = 'coordinator'
     MICRO = 'micro'
     MACRO = 'macro'
+    PLANT = 'plant'
 
 
 @dataclass(frozen=True)
@@ -176,3 +181,29 @@ CONTRACT: Dict[str, Topic] = {t.name: t for t in STREAMS + COMMANDS + REPLIES + 
 def produced_by(producer: Producer) -> Tuple[Topic, ...]:
     """Return the streams a stage produces (what its process's frames carry)."""
     return tuple(t for t in STREAMS if t.producer is producer)
+
+
+# --- a plant of cells (docs/plant.md): names relative to the plant's namespace, ``{link}``
+# standing for a link's name; every cell's own interface (above) is under its namespace.
+_PLANT = Producer.PLANT
+#: Parts that left through a link and how far its exit cell has run (published by the exit).
+PART_TRANSFER = Topic('links/{link}/transfer', _MSGS + 'PartTransfer', _S, PLANT_QOS,
+                      Rate.SYNC, Stamp.HEADER, _PLANT)
+#: Parts the entry cell inserted and how far it has run (published by the entry).
+TRANSFER_ACCEPTED = Topic('links/{link}/accepted', _MSGS + 'TransferAccepted', _S, PLANT_QOS,
+                          Rate.SYNC, Stamp.HEADER, _PLANT)
+#: Every cell's progress and part counts (the plant-wide ledger is built from them).
+CELL_PROGRESS = Topic('progress', _MSGS + 'CellProgress', _S, PLANT_QOS, Rate.SYNC,
+                      Stamp.HEADER, _PLANT)
+#: The plant-wide ledger and progress, status ``conveyor_twin: plant`` (1 Hz of wall time,
+#: from ``conveyor-twin plant``).
+PLANT_DIAGNOSTICS = Topic('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', _S, SLOW_QOS,
+                          Rate.DIAGNOSTICS, Stamp.HEADER, _PLANT)
+#: The plant's topics by name (relative to the plant's namespace).
+PLANT: Dict[str, Topic] = {t.name: t for t in (PART_TRANSFER, TRANSFER_ACCEPTED, CELL_PROGRESS,
+                                               PLANT_DIAGNOSTICS)}
+
+
+def link_topic(topic: Topic, plant_namespace: str, link: str) -> str:
+    """Return the absolute name of a link's topic (``/<plant namespace>/links/<link>/...``)."""
+    return '/' + plant_namespace.strip('/') + '/' + topic.name.format(link=link)

@@ -39,8 +39,8 @@ def test_every_interface_entry_is_in_the_table_once():
         t.default for t in contract.STREAMS + contract.COMMANDS if t is not contract.MARKERS)
 
 
-@pytest.mark.parametrize('topic', contract.STREAMS + contract.COMMANDS + contract.REPLIES,
-                         ids=lambda t: t.name)
+@pytest.mark.parametrize('topic', contract.STREAMS + contract.COMMANDS + contract.REPLIES
+                         + tuple(contract.PLANT.values()), ids=lambda t: t.name)
 def test_every_topic_type_has_a_schema_with_the_fields_of_msg_defs(topic):
     assert topic.type_name in schemas.SCHEMAS
     package, _, name = topic.type_name.split('/')
@@ -58,6 +58,7 @@ def test_every_topic_type_has_a_schema_with_the_fields_of_msg_defs(topic):
 
 def test_every_interface_file_is_in_the_table():
     in_table = {t.type_name for t in contract.CONTRACT.values()}
+    in_table |= {t.type_name for t in contract.PLANT.values()}
     for path in sorted((MSG_DEFS / 'msg').glob('*.msg')):
         assert f'conveyor_twin_msgs/msg/{path.stem}' in in_table, path.name
     for path in sorted((MSG_DEFS / 'srv').glob('*.srv')):
@@ -85,3 +86,14 @@ def test_qos_rates_stamps_and_producers():
     assert contract.produced_by(Producer.MACRO) == (contract.DENSITY,)
     assert set(contract.produced_by(Producer.MICRO)) == {
         contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES, contract.MARKERS}
+
+
+def test_plant_topics_lose_nothing_and_name_each_link():
+    for topic in contract.PLANT.values():
+        assert topic.producer is Producer.PLANT and topic.stamp is Stamp.HEADER
+        if topic is not contract.PLANT_DIAGNOSTICS:
+            assert (topic.qos.reliability, topic.qos.history) == ('reliable', 'keep_all')
+    assert contract.link_topic(contract.PART_TRANSFER, 'line', 'a_b') == \
+        '/line/links/a_b/transfer'
+    assert contract.link_topic(contract.TRANSFER_ACCEPTED, '/line/', 'a_b') == \
+        '/line/links/a_b/accepted'

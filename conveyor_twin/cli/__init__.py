@@ -7,6 +7,8 @@ from typing import List, Optional
 # verb -> (module, one-line help). Each module has ``main(argv: List[str]) -> int``.
 VERBS = {
     'run': ('conveyor_twin.cli.run', 'run the twin on a cell (default: the embedded cell)'),
+    'plant': ('conveyor_twin.cli.plant',
+              'run a plant of cells coupled by transfer links (one process per cell)'),
     'validate': ('conveyor_twin.cli.validate', 'check a cell file and summarise it'),
     'bench': ('conveyor_twin.cli.bench', 'run a benchmark: micro, macro, twin, scale'),
     'record': ('conveyor_twin.ros.record_node', "record a live twin's topics to MCAP"),

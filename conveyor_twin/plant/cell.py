@@ -37,15 +37,20 @@ class PlantCellCore:
     :param run: id of this run of the cell (reported to upstream cells; a restarted cell
         process takes another so they send again what it never inserted).
     :param check_balance: check the cell's part ledger every step (see ``build_twin``).
+    :param twin: the composed twin of the cell to step (one a ROS layer built, with its
+        streams); None: build one.
+    :param lockstep: step as one with the neighbours: never more than one step ahead of any.
     """
 
     def __init__(self, plant: Plant, name: str, *, run: int = 0,
-                 check_balance: Optional[bool] = None) -> None:
+                 check_balance: Optional[bool] = None, twin: Optional[AssembledTwin] = None,
+                 lockstep: bool = False) -> None:
         self.plant = plant
         self.spec: PlantCell = plant.cell(name)
         self.name = name
-        self.twin: AssembledTwin = build_twin(self.spec.cell, seed=self.spec.seed,
-                                              check_balance=check_balance)
+        self.lockstep = lockstep
+        self.twin: AssembledTwin = twin if twin is not None else build_twin(
+            self.spec.cell, seed=self.spec.seed, check_balance=check_balance)
         sim = self.twin.micro.sim
         sim.state.counters[C_NEXT_ID] = self.spec.index * ID_RANGE + 1
         self.exits: List[LinkExit] = [LinkExit(k) for k in plant.links_from(name)]
@@ -63,7 +68,11 @@ class PlantCellCore:
 
     def horizon(self) -> int:
         """The last step this cell may compute now (:func:`~conveyor_twin.plant.sync.horizon`)."""
-        return horizon(self.entries, self.exits)
+        limit = horizon(self.entries, self.exits)
+        if self.lockstep:
+            for end in (*self.entries, *self.exits):
+                limit = min(limit, end.peer_through + 1)
+        return limit
 
     def may_step(self) -> bool:
         """True if the next step may be computed with what the neighbours reported."""

@@ -61,14 +61,16 @@ class Departures:
 @dataclass
 class Acceptances:
     """Entry to exit: parts inserted (``seq`` and the step of insertion, in order), the entry
-    cell's completed step, and the id of the entry cell's current run (a restarted cell has
-    another)."""
+    cell's completed step, the id of the entry cell's current run (a restarted cell has
+    another), and whether the entry still waits for the exit's oldest held part
+    (``starting``: the exit then sends every part it holds)."""
 
     link: str
     through: int
     run: int
     seq: List[int] = field(default_factory=list)
     step: List[int] = field(default_factory=list)
+    starting: bool = False
 
 
 class LinkExit:
@@ -128,6 +130,11 @@ class LinkExit:
         held_from = self.held[0].seq if self.held else self.sent
         return Departures(self.link.name, self.through, first, held_from, parts)
 
+    def _send_held(self) -> None:
+        """Make the next batch start at the oldest held part."""
+        self._outgoing = list(self.held)
+        self._first_unsent = self.held[0].seq if self.held else self.sent
+
     @property
     def has_outgoing(self) -> bool:
         """True if parts wait to be sent."""
@@ -137,15 +144,19 @@ class LinkExit:
         """Take the entry's report: drop the parts it inserted, learn its progress.
 
         A report from another run of the entry cell (restarted) makes every held part go
-        out again (the new run starts empty and takes them from the oldest on).
+        out again (the new run starts empty and takes them from the oldest on); so does a
+        report of an entry still ``starting`` (its first batch was lost before the two ends
+        had found each other).
         """
         if self.peer_run is not None and batch.run != self.peer_run:
             self._accepted_before += len(self._accepted_steps)
             self._accepted_steps = []
-            self._outgoing = list(self.held)
-            self._first_unsent = self.held[0].seq if self.held else self.sent
             self.resent += len(self.held)
             self.peer_through = batch.through
+            self._send_held()
+        elif batch.starting and self._first_unsent != (self.held[0].seq if self.held
+                                                       else self.sent):
+            self._send_held()
         self.peer_run = batch.run
         for seq, step in zip(batch.seq, batch.step):
             if not self.held or self.held[0].seq != seq:
@@ -177,10 +188,10 @@ class LinkEntry:
 
     def receive(self, batch: Departures) -> None:
         """Take a batch of departures: parts in sequence are queued, repeats ignored; a fresh
-        entry starts with the batch that begins at the exit's oldest held part."""
+        entry starts with the batch that begins at the exit's oldest held part (until then it
+        learns nothing from the exit, not even how far it ran: it may not step)."""
         if self.expected is None:
             if batch.first_seq != batch.held_from:
-                self.peer_through = max(self.peer_through, batch.through)
                 return
             self.expected = batch.first_seq
         for part in batch.parts:
@@ -222,7 +233,8 @@ class LinkEntry:
 
     def batch(self) -> Acceptances:
         """Return the insertions not reported yet with the current ``through``."""
-        out = Acceptances(self.link.name, self.through, self.run, self._seq, self._step)
+        out = Acceptances(self.link.name, self.through, self.run, self._seq, self._step,
+                          starting=self.expected is None)
         self._seq, self._step = [], []
         return out
 

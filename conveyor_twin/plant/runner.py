@@ -8,8 +8,9 @@ rule allows (:mod:`conveyor_twin.plant.sync`) before the batches move: cells run
 delay apart. Both give the same bits, and so does one process per cell.
 """
 
-from typing import Dict, List, Optional
+from typing import Dict, List, Mapping, Optional
 
+from conveyor_twin.coord.assembly import AssembledTwin
 from conveyor_twin.plant.cell import PlantCellCore
 from conveyor_twin.plant.ledger import LinkCounts, PlantLedger
 from conveyor_twin.plant.link import LinkEntry, LinkExit
@@ -21,12 +22,17 @@ class PlantRunner:
 
     :param plant: the validated plant.
     :param check_balance: check each cell's part ledger every step.
+    :param twins: the composed twins of some cells, by name (a ROS layer built them, with
+        their streams); the others are built here.
     """
 
-    def __init__(self, plant: Plant, *, check_balance: Optional[bool] = None) -> None:
+    def __init__(self, plant: Plant, *, check_balance: Optional[bool] = None,
+                 twins: Optional[Mapping[str, AssembledTwin]] = None) -> None:
         self.plant = plant
+        twins = twins or {}
         self.cells: List[PlantCellCore] = [PlantCellCore(plant, c.name,
-                                                         check_balance=check_balance)
+                                                         check_balance=check_balance,
+                                                         twin=twins.get(c.name))
                                            for c in plant.cells]
         self.by_name: Dict[str, PlantCellCore] = {c.name: c for c in self.cells}
         self._exits: Dict[str, LinkExit] = {}
@@ -77,8 +83,8 @@ class PlantRunner:
             e = self._entries[name]
             owner = self.by_name[e.link.target.cell]
             waiting = owner.waiting[owner.entries.index(e)]
-            links[name] = LinkCounts(sent=x.sent, inserted=x.accepted + len(e._seq),
-                                     waiting=waiting, resent=x.resent)
+            links[name] = LinkCounts(sent=x.sent, inserted=e.inserted, waiting=waiting,
+                                     resent=x.resent)
         return PlantLedger({c.name: c.counts() for c in self.cells}, links)
 
     def state_hashes(self) -> Dict[str, str]:

@@ -411,6 +411,74 @@ _GEOMETRY_QUATERNION = (
     'float64 w 1\n'
 )
 
+_PARTTRANSFER = (
+    '# Parts that left a cell of a plant through a transfer link, and how far that cell ran.\n'
+    "# Published by the link's exit cell on the link's `transfer` topic; the entry cell inserts\n"
+    "# each part at step_left + the link's delay (later if its entry is occupied). Structure of\n"
+    '# arrays: entry i of every array describes the same part. Poses and velocities are relative\n'
+    "# to the link's exit frame (origin at the exit, x along the belt that carries parts there).\n"
+    '\n'
+    "std_msgs/Header header  # stamp: simulation time of `through`; frame_id: the link's name\n"
+    "string link             # the link's name in the plant file\n"
+    'uint64 through          # steps the exit cell has completed: every part that left in a\n'
+    '                        # step <= through is in this message or an earlier one [1]\n'
+    'uint64 first_seq        # number of the first part here in the link; the others follow [1]\n'
+    'uint64 held_from        # number of the oldest part the exit still holds (not reported\n'
+    '                        # inserted; a restarted entry cell starts from it) [1]\n'
+    'uint64[] step_left      # step in which the part left the exit cell [1]\n'
+    "uint32[] id             # the part's id in the exit cell [1]\n"
+    "uint32[] origin_id      # the part's id where it entered the plant [1]\n"
+    "uint16[] part_type      # index of the part type in the exit cell's description [1]\n"
+    'float64[] x             # position relative to the exit frame [m]\n'
+    'float64[] y             # lateral offset relative to the exit frame [m]\n'
+    'float64[] yaw           # orientation relative to the exit frame [rad]\n'
+    "float64[] vx            # velocity along the exit frame's x [m/s]\n"
+    "float64[] vy            # velocity along the exit frame's y [m/s]\n"
+    'float64[] wz            # angular velocity about +z [rad/s]\n'
+)
+
+_TRANSFERACCEPTED = (
+    '# Parts a cell of a plant inserted from a transfer link, and how far that cell has run.\n'
+    "# Published by the link's entry cell on the link's `accepted` topic; the exit cell holds\n"
+    '# every part until it is reported here, and (for a link with a capacity) counts the room.\n'
+    '\n'
+    "std_msgs/Header header  # stamp: simulation time of `through`; frame_id: the link's name\n"
+    "string link             # the link's name in the plant file\n"
+    'uint64 through          # steps the entry cell has completed [1]\n'
+    "uint64 run              # id of the entry cell's current run; another id means it\n"
+    '                        # restarted empty [1]\n'
+    "bool starting           # the entry has not received the exit's oldest held part yet (a\n"
+    '                        # fresh run): the exit sends every part it holds (again)\n'
+    'uint64[] seq            # number of each inserted part in the link, ascending [1]\n'
+    'uint64[] step           # step in which it was inserted [1]\n'
+)
+
+_CELLPROGRESS = (
+    '# How far a cell of a plant has run and its part counts: the plant-wide ledger and\n'
+    '# progress are built from these (entered = in cells + in links + left + vanished).\n'
+    '\n'
+    "std_msgs/Header header  # stamp: simulation time of `step`; frame_id: the cell's name\n"
+    "string cell             # the cell's name in the plant file\n"
+    'uint64 step             # steps completed [1]\n'
+    'uint64 end_step         # the step the run ends at (0: no end) [1]\n'
+    'bool done               # the cell completed end_step\n'
+    "uint64 run              # id of the cell's current run [1]\n"
+    'float64 entered         # parts that entered through its sources and spawns [parts]\n'
+    'float64 in_cell         # parts in the cell now (micro bodies and macro density) [parts]\n'
+    'float64 left            # parts that left through its sinks (not links) [parts]\n'
+    'float64 vanished        # parts that fell off the line (fault parts_vanish) [parts]\n'
+    'string[] exit_link      # the links this cell feeds\n'
+    'uint64[] exit_sent      # parts sent into each [1]\n'
+    'uint64[] exit_accepted  # of those, parts its entry cell reported inserted [1]\n'
+    'uint64[] exit_resent    # parts sent again to a restarted entry cell [1]\n'
+    'string[] entry_link     # the links that feed this cell\n'
+    'uint64[] entry_inserted # parts inserted from each [1]\n'
+    'uint64[] entry_waiting  # parts due and waiting because the entry is occupied [1]\n'
+    'float64 step_time_mean_ms  # mean wall time of a step since the start [ms]\n'
+    'float64 real_time_factor   # simulated over wall time since the start [1]\n'
+    "string state_hash       # SHA-256 of the cell's state and of every part it sent (see docs)\n"
+)
+
 #: ``.msg`` texts of the types ``markers`` (visualization_msgs/MarkerArray) needs, as the
 #: Kilted message packages ship them (Marker with texture, UV coordinates and mesh file).
 _MARKER_TEXTS: Dict[str, str] = {
@@ -438,6 +506,9 @@ MSG_TEXTS: Dict[str, str] = {
     'conveyor_twin_msgs/msg/ActuatorCommand': _ACTUATORCOMMAND,
     'conveyor_twin_msgs/msg/ActuatorStates': _ACTUATORSTATES,
     'conveyor_twin_msgs/msg/FaultState': _FAULTSTATE,
+    'conveyor_twin_msgs/msg/PartTransfer': _PARTTRANSFER,
+    'conveyor_twin_msgs/msg/TransferAccepted': _TRANSFERACCEPTED,
+    'conveyor_twin_msgs/msg/CellProgress': _CELLPROGRESS,
     'conveyor_twin_msgs/srv/SpawnParts_Request': _SPAWNPARTS_REQUEST,
     'conveyor_twin_msgs/srv/Reset_Request': _RESET_REQUEST,
     'std_msgs/msg/Header': _HEADER,
