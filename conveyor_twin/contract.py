@@ -46,8 +46,8 @@ SLOW_QOS = OfferedQos(depth=10)
 #: The active faults, sent on change: latched (transient local), so a late joiner gets the
 #: latest states (the last is the current set); deep enough that a burst of changes is not lost.
 LATCHED_QOS = OfferedQos(depth=100, durability='transient_local')
-#: The links of a plant and the cells' progress: reliable, keep-all, so no batch of parts and
-#: no report is ever dropped from the history (docs/plant.md).
+#: The links of a plant: reliable, keep-all, so no batch of parts is ever dropped from the
+#: history (docs/plant.md).
 PLANT_QOS = OfferedQos(history='keep_all', depth=1000)
 
 
@@ -192,8 +192,9 @@ PART_TRANSFER = Topic('links/{link}/transfer', _MSGS + 'PartTransfer', _S, PLANT
 #: Parts the entry cell inserted and how far it has run (published by the entry).
 TRANSFER_ACCEPTED = Topic('links/{link}/accepted', _MSGS + 'TransferAccepted', _S, PLANT_QOS,
                           Rate.SYNC, Stamp.HEADER, _PLANT)
-#: Every cell's progress and part counts (the plant-wide ledger is built from them).
-CELL_PROGRESS = Topic('progress', _MSGS + 'CellProgress', _S, PLANT_QOS, Rate.SYNC,
+#: Every cell's progress and part counts (the plant-wide ledger is built from them); only the
+#: latest matters, so keep-last: at most every 0.2 s of wall time, and when the cell is done.
+CELL_PROGRESS = Topic('progress', _MSGS + 'CellProgress', _S, STREAM_QOS, Rate.SYNC,
                       Stamp.HEADER, _PLANT)
 #: The plant-wide ledger and progress, status ``conveyor_twin: plant`` (1 Hz of wall time,
 #: from ``conveyor-twin plant``).

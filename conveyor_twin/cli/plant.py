@@ -42,6 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--run-id', type=int, default=None,
                    help='id of this run of the cell (--cell; default: from the clock, so a '
                    'restarted cell gets the parts its links hold sent again)')
+    p.add_argument('--hold', action='store_true',
+                   help='--cell: after the end, keep reporting until a signal (the parent of '
+                   '--processes stops its cells itself)')
     p.add_argument('--no-streams', action='store_true',
                    help="serve only the links, not each cell's own topics and services")
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
@@ -81,7 +84,7 @@ def run_cell(plant: Plant, args: argparse.Namespace) -> int:
             if node.error is not None:
                 break
             if node.done.is_set():
-                if node.all_done():
+                if node.all_done() and not args.hold:
                     break
                 if time.monotonic() - last > 0.5:  # a late subscriber gets it too
                     node._flush(done=True)
@@ -128,7 +131,7 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
             for c in plant.cells:
                 cmd = [sys.executable, '-m', 'conveyor_twin.cli', 'plant', args.plant,
                        '--cell', c.name, '--mode', args.mode, '--duration',
-                       repr(args.duration), '--quiet']
+                       repr(args.duration), '--quiet', '--hold']
                 if args.no_streams:
                     cmd.append('--no-streams')
                 procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True,
@@ -147,8 +150,13 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
                 break
             if composed is not None and composed.error is not None:
                 break
-            if any(p.poll() is not None for p in procs):
-                print('conveyor-twin plant: a cell process ended early', file=sys.stderr)
+            early = [c.name for c, p in zip(plant.cells, procs) if p.poll() is not None
+                     and (p.returncode != 0 or c.name not in monitor.reports
+                          or not monitor.reports[c.name].done)]
+            if early:
+                codes = {c.name: p.poll() for c, p in zip(plant.cells, procs)}
+                print(f'conveyor-twin plant: cell process(es) {early} ended early (exit codes '
+                      f'{codes})', file=sys.stderr)
                 break
         for _ in range(10):  # the last reports
             executor.spin_once(timeout_sec=0.02)

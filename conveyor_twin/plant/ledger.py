@@ -37,6 +37,8 @@ class PlantLedger:
 
     cells: Dict[str, Dict[str, float]] = field(default_factory=dict)
     links: Dict[str, LinkCounts] = field(default_factory=dict)
+    #: Parts that were in cell processes that ended (killed, restarted) at their last report.
+    lost: float = 0.0
 
     @property
     def entered(self) -> float:
@@ -67,13 +69,14 @@ class PlantLedger:
     def residual(self) -> float:
         """``entered - in_cells - in_links - left - vanished``: 0 when nothing was lost or
         duplicated (for reports of one step)."""
-        return self.entered - self.in_cells - self.in_links - self.left - self.vanished
+        return (self.entered - self.in_cells - self.in_links - self.left - self.vanished
+                - self.lost)
 
     def as_dict(self) -> Dict[str, float]:
         """Return the totals and the links as a flat mapping (diagnostics, summaries)."""
         out = {'entered': self.entered, 'in_cells': self.in_cells,
                'in_links': float(self.in_links), 'left': self.left,
-               'vanished': self.vanished, 'residual': self.residual}
+               'vanished': self.vanished, 'lost': self.lost, 'residual': self.residual}
         for name, k in self.links.items():
             out[f'link_{name}_sent'] = float(k.sent)
             out[f'link_{name}_inserted'] = float(k.inserted)
@@ -86,6 +89,7 @@ class PlantLedger:
         lines = [f'ledger: entered {self.entered:g} = in cells {self.in_cells:g} + in links '
                  f'{self.in_links} + left {self.left:g}'
                  + (f' + vanished {self.vanished:g}' if self.vanished else '')
+                 + (f' + lost with ended cell processes {self.lost:g}' if self.lost else '')
                  + f' (residual {self.residual:g})']
         for name, k in self.links.items():
             extra = f', re-sent {k.resent}' if k.resent else ''
@@ -95,6 +99,6 @@ class PlantLedger:
 
 
 def ledger_from(cells: Mapping[str, Mapping[str, float]],
-                links: Mapping[str, LinkCounts]) -> PlantLedger:
+                links: Mapping[str, LinkCounts], lost: float = 0.0) -> PlantLedger:
     """Build a ledger from per-cell counts and per-link counts."""
-    return PlantLedger({k: dict(v) for k, v in cells.items()}, dict(links))
+    return PlantLedger({k: dict(v) for k, v in cells.items()}, dict(links), lost)

@@ -19,9 +19,10 @@ publishes it on the plant's ``diagnostics`` (status ``conveyor_twin: plant``).
 
 import threading
 import time
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.context import Context
 from rclpy.node import Node
 
@@ -43,6 +44,8 @@ CellProgress = message_class(contract.CELL_PROGRESS.type_name)
 
 #: Longest wait of a stepping thread for its neighbours before it looks again [s].
 WAIT_PERIOD = 0.05
+#: Shortest wall time between two ``progress`` reports of a cell (but the last) [s].
+PROGRESS_PERIOD = 0.2
 
 
 def sync_period(plant: Plant, mode: TimeMode) -> int:
@@ -123,21 +126,39 @@ def progress_msg(core: PlantCellCore, *, end_step: int, done: bool, stats: StepS
     return m
 
 
-def ledger_of(reports: Dict[str, 'CellProgress']) -> PlantLedger:
-    """Return the plant-wide ledger from the latest report of every cell (links as their
-    exits report them: held = sent - accepted)."""
-    cells, links = {}, {}
-    waiting: Dict[str, int] = {}
-    for m in reports.values():
-        cells[m.cell] = {'entered': m.entered, 'in_cell': m.in_cell, 'left': m.left,
-                         'vanished': m.vanished}
-        for name, w in zip(m.entry_link, m.entry_waiting):
-            waiting[name] = int(w)
+def ledger_of(reports: Dict[str, 'CellProgress'],
+              ended: Sequence['CellProgress'] = ()) -> PlantLedger:
+    """Return the plant-wide ledger from the latest report of every cell and the last reports
+    of cell runs that ended (a process killed or restarted).
+
+    A link's parts sent are as its exit cell reports them; inserted as its entry cell's runs
+    report them (as the exit heard it if the entry cell has not reported). A run that ended
+    keeps what entered and left through it; the parts it held at its last report are
+    ``lost``, and what it inserted after that report is still held by the exit, which sends
+    it again to the next run. Exact for reports of the same step.
+    """
+    cells: Dict[str, Dict[str, float]] = {}
+    inserted: Dict[str, List[int]] = {}
+    lost = 0.0
+    for m in (*ended, *reports.values()):
+        current = reports.get(m.cell) is m
+        key = m.cell if current else f'{m.cell}#{m.run}'
+        cells[key] = {'entered': m.entered, 'in_cell': m.in_cell if current else 0.0,
+                      'left': m.left, 'vanished': m.vanished}
+        if not current:
+            lost += m.in_cell
+        for name, n, w in zip(m.entry_link, m.entry_inserted, m.entry_waiting):
+            got = inserted.setdefault(name, [0, 0])
+            got[0] += int(n)
+            if current:
+                got[1] = int(w)
+    links = {}
     for m in reports.values():
         for name, sent, acc, res in zip(m.exit_link, m.exit_sent, m.exit_accepted,
                                         m.exit_resent):
-            links[name] = LinkCounts(int(sent), int(acc), waiting.get(name, 0), int(res))
-    return PlantLedger(cells, links)
+            n, w = inserted.get(name, (int(acc), 0))
+            links[name] = LinkCounts(int(sent), n, w, int(res))
+    return PlantLedger(cells, links, lost)
 
 
 class PlantCellNode:
@@ -198,14 +219,19 @@ class PlantCellNode:
                 TransferAccepted, contract.link_topic(contract.TRANSFER_ACCEPTED, ns,
                                                       x.link.name),
                 self._receiver(x.receive, acceptances_of), qos))
+        progress_qos = to_rclpy(contract.CELL_PROGRESS.qos)
         self._progress_pub = self.node.create_publisher(CellProgress,
-                                                        contract.CELL_PROGRESS.name, qos)
+                                                        contract.CELL_PROGRESS.name,
+                                                        progress_qos)
         self._subs.append(self.node.create_subscription(CellProgress,
                                                         contract.CELL_PROGRESS.name,
-                                                        self._on_progress, qos))
+                                                        self._on_progress, progress_qos))
+        self._progress_at = 0.0
         self.executor.add_node(self.node)
         self._threads: List[threading.Thread] = []
         self.wall_start = self.wall_end = 0.0
+        #: Publishes the middleware refused at first (and that were retried).
+        self.publish_retries = 0
 
     def _refuse_step(self, n: int = 1) -> None:
         self.node.get_logger().warning('step service ignored: the plant steps this cell')
@@ -231,11 +257,27 @@ class PlantCellNode:
                         for x in core.exits]
             outgoing += [(self._acc_pub[e.link.name], acceptances_msg(e.batch(), time_ns))
                          for e in core.entries]
-            outgoing.append((self._progress_pub, progress_msg(
-                core, end_step=self.end_step, done=done, stats=self.stats,
-                rtf=self.real_time_factor(), with_hash=done)))
+            now = time.monotonic()
+            if done or now - self._progress_at >= PROGRESS_PERIOD:
+                self._progress_at = now
+                outgoing.append((self._progress_pub, progress_msg(
+                    core, end_step=self.end_step, done=done, stats=self.stats,
+                    rtf=self.real_time_factor(), with_hash=done)))
         for pub, msg in outgoing:
-            pub.publish(msg)
+            self._publish(pub, msg)
+
+    def _publish(self, pub, msg) -> None:
+        """Publish, retrying while the middleware refuses (a keep-all history full of samples
+        a slow subscriber has not acknowledged yet): nothing of a link may be dropped."""
+        while True:
+            try:
+                pub.publish(msg)
+                return
+            except RCLError:
+                self.publish_retries += 1
+                if self._stop.is_set():
+                    raise
+                time.sleep(0.01)
 
     def _loop(self) -> None:
         core = self.core
@@ -342,7 +384,8 @@ class ComposedPlant:
         self.stats = StepStats()
         self.node = Node('plant_composed', namespace='/' + plant.namespace, context=context)
         self._progress_pub = self.node.create_publisher(
-            CellProgress, contract.CELL_PROGRESS.name, to_rclpy(contract.PLANT_QOS))
+            CellProgress, contract.CELL_PROGRESS.name, to_rclpy(contract.CELL_PROGRESS.qos))
+        self._progress_at = 0.0
         self.executor = make_executor(context)
         self.executor.add_node(self.node)
         self._stop = threading.Event()
@@ -386,7 +429,8 @@ class ComposedPlant:
                 dt = (time.perf_counter() - t0) / n
                 for _ in range(min(n, 4)):
                     self.stats.add(dt)
-                if runner.step_index % self.period == 0:
+                if time.monotonic() - self._progress_at >= PROGRESS_PERIOD:
+                    self._progress_at = time.monotonic()
                     self._publish(False)
                 if self.mode is TimeMode.REALTIME:
                     pacer.wait_next()
@@ -434,20 +478,25 @@ class PlantMonitor:
     def __init__(self, plant: Plant, *, context: Context) -> None:
         self.plant = plant
         self.reports: Dict[str, 'CellProgress'] = {}
+        #: The last report of every cell run that ended (another run of the cell reported).
+        self.ended: List['CellProgress'] = []
         self.node = Node('plant_monitor', namespace='/' + plant.namespace, context=context)
         self._sub = self.node.create_subscription(CellProgress, contract.CELL_PROGRESS.name,
                                                   self._on_progress,
-                                                  to_rclpy(contract.PLANT_QOS))
+                                                  to_rclpy(contract.CELL_PROGRESS.qos))
         self._diag = self.node.create_publisher(DiagnosticArray,
                                                 contract.PLANT_DIAGNOSTICS.name,
                                                 to_rclpy(contract.PLANT_DIAGNOSTICS.qos))
 
     def _on_progress(self, msg: 'CellProgress') -> None:
+        old = self.reports.get(msg.cell)
+        if old is not None and old.run != msg.run:
+            self.ended.append(old)
         self.reports[msg.cell] = msg
 
     def ledger(self) -> PlantLedger:
         """Return the plant-wide ledger from the latest reports."""
-        return ledger_of(dict(self.reports))
+        return ledger_of(dict(self.reports), list(self.ended))
 
     def steps(self) -> Dict[str, int]:
         """Return every cell's last reported step (-1: no report yet)."""
