@@ -15,6 +15,7 @@ BENCHES = {
     'host': 'conveyor_twin.bench.host',
     'soak': 'conveyor_twin.bench.soak',
     'testing': 'conveyor_twin.bench.testing',
+    'plant': 'conveyor_twin.bench.plant',
 }
 
 

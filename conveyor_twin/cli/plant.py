@@ -187,7 +187,8 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
                'mode': args.mode, 'cells': len(plant.cells), 'steps': steps,
                'sim_time_s': max(min(steps.values()), 0) * plant.step, 'wall_s': wall,
                'ledger': ledger.as_dict(),
-               'state_hashes': {m.cell: m.state_hash for m in monitor.reports.values()}}
+               'state_hashes': {m.cell: m.state_hash for m in monitor.reports.values()},
+               'cells_rtf': {m.cell: m.real_time_factor for m in monitor.reports.values()}}
     summary['real_time_factor'] = summary['sim_time_s'] / wall if wall > 0 else 0.0
     if args.json:
         print(json.dumps(summary, sort_keys=True))

@@ -279,12 +279,30 @@ class PlantCellNode:
                     raise
                 time.sleep(0.01)
 
+    def neighbours(self) -> List[str]:
+        """Return the cells this one shares a link with."""
+        names = {e.link.source.cell for e in self.core.entries}
+        names |= {x.link.target.cell for x in self.core.exits}
+        return sorted(names)
+
+    def _meet_neighbours(self) -> None:
+        """Report, and wait until every neighbour has reported once: the links' topics are
+        then matched both ways, and the stepping starts together (the real-time factor
+        counts stepping, not start-up)."""
+        while not self._stop.is_set():
+            self._flush()
+            if all(n in self.reports for n in self.neighbours()):
+                return
+            self._wake.wait(WAIT_PERIOD)
+            self._wake.clear()
+
     def _loop(self) -> None:
         core = self.core
         pacer = DeadlinePacer(step_ns(self.plant.step))
         realtime = self.mode is TimeMode.REALTIME
         end = self.end_step or (1 << 62)
         since = 0
+        self._meet_neighbours()
         self.wall_start = time.monotonic()
         pacer.restart()
         try:
