@@ -36,6 +36,9 @@ def build_parser() -> argparse.ArgumentParser:
     layout.add_argument('--composed', action='store_true', help='every cell in this process')
     layout.add_argument('--cell', default='', help='run only this cell (as each process of '
                         '--processes does; start one per cell, on any host)')
+    layout.add_argument('--monitor', action='store_true',
+                        help='start no cell: show the progress and ledger of cells started '
+                        'with --cell (on any host) and publish the plant\'s diagnostics')
     p.add_argument('--mode', default='fast', choices=[m.value for m in TimeMode])
     p.add_argument('--duration', type=float, default=DEFAULT_DURATION,
                    help='simulated seconds to run (0: until Ctrl-C) [s]')
@@ -123,7 +126,9 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
     procs: List[subprocess.Popen] = []
     t0 = time.monotonic()
     try:
-        if args.composed:
+        if args.monitor:
+            pass
+        elif args.composed:
             composed = ComposedPlant(plant, context=context, mode=TimeMode(args.mode),
                                      end_step=end, streams=not args.no_streams)
             composed.start()
@@ -183,7 +188,8 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
     ledger = monitor.ledger()
     wall = time.monotonic() - t0
     steps = monitor.steps()
-    summary = {'plant': plant.name, 'layout': 'composed' if args.composed else 'processes',
+    layout = 'composed' if args.composed else 'monitor' if args.monitor else 'processes'
+    summary = {'plant': plant.name, 'layout': layout,
                'mode': args.mode, 'cells': len(plant.cells), 'steps': steps,
                'sim_time_s': max(min(steps.values()), 0) * plant.step, 'wall_s': wall,
                'ledger': ledger.as_dict(),
