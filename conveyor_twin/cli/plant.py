@@ -50,6 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
                    '--processes stops its cells itself)')
     p.add_argument('--no-streams', action='store_true',
                    help="serve only the links, not each cell's own topics and services")
+    p.add_argument('--record', default='', metavar='DIR',
+                   help="record each cell's streams to DIR/<cell>.mcap (replay them with "
+                   '`conveyor-twin replay`)')
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
     return p
@@ -79,7 +82,8 @@ def run_cell(plant: Plant, args: argparse.Namespace) -> int:
     context = _init_ros()
     stop = _interrupts()
     node = PlantCellNode(plant, args.cell, context=context, mode=TimeMode(args.mode),
-                         end_step=end, run=run, streams=not args.no_streams)
+                         end_step=end, run=run, streams=not args.no_streams,
+                         record=args.record)
     node.start()
     try:
         last = 0.0
@@ -130,7 +134,8 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
             pass
         elif args.composed:
             composed = ComposedPlant(plant, context=context, mode=TimeMode(args.mode),
-                                     end_step=end, streams=not args.no_streams)
+                                     end_step=end, streams=not args.no_streams,
+                                     record=args.record)
             composed.start()
         else:
             for c in plant.cells:
@@ -139,6 +144,8 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
                        repr(args.duration), '--quiet', '--hold']
                 if args.no_streams:
                     cmd.append('--no-streams')
+                if args.record:
+                    cmd += ['--record', args.record]
                 procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True,
                                               start_new_session=True))
         last = 0.0
@@ -214,6 +221,10 @@ def main(argv: List[str]) -> int:
         plant = load_plant(args.plant)
     except CellError as exc:
         print(f'conveyor-twin plant: {exc}', file=sys.stderr)
+        return 2
+    if args.record and args.no_streams:
+        print('conveyor-twin plant: --record needs the cells\' streams (not --no-streams)',
+              file=sys.stderr)
         return 2
     if args.cell:
         if args.cell not in [c.name for c in plant.cells]:

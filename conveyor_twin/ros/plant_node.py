@@ -17,6 +17,7 @@ the same ``progress``. :class:`PlantMonitor` builds the plant-wide ledger from `
 publishes it on the plant's ``diagnostics`` (status ``conveyor_twin: plant``).
 """
 
+from pathlib import Path
 import threading
 import time
 from typing import Callable, Dict, List, Optional, Sequence
@@ -54,6 +55,37 @@ def sync_period(plant: Plant, mode: TimeMode) -> int:
     if mode is TimeMode.LOCKSTEP:
         return 1
     return max(1, plant.min_delay // 4)
+
+
+def record_cell(composed, plant: Plant, name: str, folder: str, mode: TimeMode):
+    """Record a plant cell's frames (every stream of its namespace) to ``folder/<name>.mcap``;
+    return the :class:`~conveyor_twin.ros.run_recording.TwinRecording` (close it after the
+    cell stopped). The file carries the cell file, the seed and the plant's name and file.
+
+    :raises RecordingError: if the file cannot be created.
+    """
+    from conveyor_twin.cell.loader import default_cell_text
+    from conveyor_twin.record.writer import McapRecorder
+    from conveyor_twin.ros.run_recording import TwinRecording
+    spec = plant.cell(name)
+    source = spec.cell.source_file
+    try:
+        with open(source, encoding='utf-8') as f:
+            text = f.read()
+    except OSError:
+        text = default_cell_text()
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    recorder = McapRecorder(
+        str(Path(folder) / f'{name}.mcap'), cell_yaml=text, seed=spec.seed,
+        step_ns=step_ns(plant.step),
+        metadata={'recorded_by': 'conveyor-twin plant', 'plant': plant.name,
+                  'plant_file': plant.source_file, 'plant_cell': name,
+                  'namespace': '/' + spec.namespace, 'mode': mode.value})
+    try:
+        return TwinRecording(composed, recorder)
+    except BaseException:
+        recorder.close()
+        raise
 
 
 # --- batches <-> messages (pure conversions) -----------------------------------------------
@@ -174,10 +206,12 @@ class PlantCellNode:
     :param end_step: the step to run to (0: until :meth:`stop`).
     :param run: id of this run of the cell (give a restarted cell another).
     :param streams: serve the cell's own interface (parts, barriers, commands, ...).
+    :param record: folder to record the cell's streams to (``<cell>.mcap``; with streams).
     """
 
     def __init__(self, plant: Plant, name: str, *, context: Context, mode: TimeMode,
-                 end_step: int = 0, run: int = 0, streams: bool = True) -> None:
+                 end_step: int = 0, run: int = 0, streams: bool = True,
+                 record: str = '') -> None:
         self.plant = plant
         self.mode = TimeMode(mode)
         self.end_step = int(end_step)
@@ -193,6 +227,8 @@ class PlantCellNode:
             self.executor = self.composed.executor
         else:
             self.executor = make_executor(context)
+        self.recording = (record_cell(self.composed, plant, name, record, self.mode)
+                          if record and self.composed is not None else None)
         self.core = PlantCellCore(plant, name, run=run, twin=twin,
                                   lockstep=self.mode is TimeMode.LOCKSTEP)
         self.period = sync_period(plant, self.mode)
@@ -372,6 +408,8 @@ class PlantCellNode:
             self.composed.stop()
         else:
             self.executor.shutdown(timeout_sec=5.0)
+        if self.recording is not None:
+            self.recording.close()
         self.node.destroy_node()
 
 
@@ -383,10 +421,11 @@ class ComposedPlant:
         steps as one).
     :param end_step: the step to run to (0: until :meth:`stop`).
     :param streams: serve every cell's own interface under its namespace.
+    :param record: folder to record each cell's streams to (``<cell>.mcap``; with streams).
     """
 
     def __init__(self, plant: Plant, *, context: Context, mode: TimeMode, end_step: int = 0,
-                 streams: bool = True) -> None:
+                 streams: bool = True, record: str = '') -> None:
         self.plant = plant
         self.mode = TimeMode(mode)
         self.end_step = int(end_step)
@@ -400,6 +439,8 @@ class ComposedPlant:
                 ct.runner.step = self._refuse_step
                 self.composed[c.name] = ct
                 twins[c.name] = ct.assembled
+        self.recordings = [record_cell(self.composed[c.name], plant, c.name, record, self.mode)
+                           for c in plant.cells if record and c.name in self.composed]
         self.runner = PlantRunner(plant, twins=twins)
         self.period = sync_period(plant, self.mode)
         self.stats = StepStats()
@@ -485,6 +526,8 @@ class ComposedPlant:
             t.join(5.0)
         for ct in self.composed.values():
             ct.stop()
+        for recording in self.recordings:
+            recording.close()
         self.executor.shutdown(timeout_sec=5.0)
         self.node.destroy_node()
 

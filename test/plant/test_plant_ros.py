@@ -130,3 +130,40 @@ def test_a_bad_plant_file_exits_2_before_anything_starts(tmp_path):
     assert proc.returncode == 2
     assert 'links[0].delay_steps: got 0; expected an integer in [1,' in proc.stderr
     assert proc.stdout == ''
+
+
+def test_ledger_of_a_restarted_cell_counts_what_died_with_it():
+    from conveyor_twin.ros.plant_node import CellProgress, ledger_of
+
+    def report(cell, run, **kw):
+        m = CellProgress(cell=cell, run=run)
+        for k, v in kw.items():
+            setattr(m, k, v)
+        return m
+    up = report('a', 1, entered=20.0, in_cell=10.0, exit_link=['ab'], exit_sent=[10],
+                exit_accepted=[8], exit_resent=[3])
+    old = report('b', 1, in_cell=3.0, left=2.0, entry_link=['ab'], entry_inserted=[5],
+                 entry_waiting=[0])
+    new = report('b', 2, in_cell=2.0, entry_link=['ab'], entry_inserted=[2],
+                 entry_waiting=[1])
+    ledger = ledger_of({'a': up, 'b': new}, [old])
+    # the old run held 3 at its last report and reported 1 more inserted after it
+    assert ledger.lost == 3 + (8 - 5 - 2)
+    assert ledger.links['ab'].held == 2 and ledger.links['ab'].waiting == 1
+    assert ledger.in_cells == 12 and ledger.left == 2 and ledger.residual == 0.0
+    assert ledger_of({'a': up, 'b': new}).lost == 0.0
+
+
+def test_composed_plant_records_every_cell(ros_processes, tmp_path):
+    from conveyor_twin.record.reader import read_messages, read_metadata
+    proc = ros_processes.start(cli(str(CHAIN), '--composed', '--duration', '0.3', '--record',
+                                   str(tmp_path), '--json', '--quiet'),
+                               stdout=subprocess.PIPE, text=True)
+    out, _ = proc.communicate(timeout=TIMEOUT)
+    assert proc.returncode == 0, out
+    for name in ('feeder', 'first', 'second'):
+        path = str(tmp_path / f'{name}.mcap')
+        meta = read_metadata(path)
+        assert any(m.get('plant_cell') == name for m in meta.values()), meta
+        steps = [m for m in read_messages(path, topics=[f'/{name}/parts'])]
+        assert len(steps) == 300
