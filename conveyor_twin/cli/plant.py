@@ -94,7 +94,7 @@ def run_cell(plant: Plant, args: argparse.Namespace) -> int:
                 if node.all_done() and not args.hold:
                     break
                 if time.monotonic() - last > 0.5:  # a late subscriber gets it too
-                    node._flush(done=True)
+                    node.report_done()
                     last = time.monotonic()
             time.sleep(0.05)
     finally:

@@ -305,6 +305,10 @@ class PlantCellNode:
         for pub, msg in outgoing:
             self._publish(pub, msg)
 
+    def report_done(self) -> None:
+        """Publish the batches and the final report again (for a late subscriber)."""
+        self._flush(done=self.done.is_set() and self.error is None)
+
     def _publish(self, pub, msg) -> None:
         """Publish, retrying while the middleware refuses (a keep-all history full of samples
         a slow subscriber has not acknowledged yet): nothing of a link may be dropped."""
