@@ -91,7 +91,10 @@ def test_a_killed_cell_leaves_its_parts_in_the_link_and_a_restart_gets_them(
         start('feeder', 1)
         start('first', 1)
         second = start('second', 1)
-        assert wait_for(lambda: link() is not None and link().inserted >= 3, TIMEOUT,
+        # the monitor has heard the entry cell's run 1 after it inserted parts: the ledger
+        # can count what dies with it
+        assert wait_for(lambda: link() is not None and 'second' in monitor.reports
+                        and monitor.reports['second'].entry_inserted[0] >= 3, TIMEOUT,
                         executor), monitor.ledger().text()
         os.killpg(second.pid, signal.SIGKILL)
         second.wait()
