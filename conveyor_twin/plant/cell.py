@@ -48,6 +48,8 @@ class PlantCellCore:
         self.plant = plant
         self.spec: PlantCell = plant.cell(name)
         self.name = name
+        #: Id of this run of the cell.
+        self.run = run
         self.lockstep = lockstep
         self.twin: AssembledTwin = twin if twin is not None else build_twin(
             self.spec.cell, seed=self.spec.seed, check_balance=check_balance)

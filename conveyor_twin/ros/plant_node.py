@@ -141,7 +141,7 @@ def progress_msg(core: PlantCellCore, *, end_step: int, done: bool, stats: StepS
     m.header.stamp.sec, m.header.stamp.nanosec = stamp(s * step_ns(core.plant.step))
     m.header.frame_id = core.name
     m.cell, m.step, m.end_step, m.done = core.name, s, end_step, done
-    m.run = core.entries[0].run if core.entries else 0
+    m.run = core.run
     c = core.counts()
     m.entered, m.in_cell, m.left, m.vanished = (c['entered'], c['in_cell'], c['left'],
                                                 c['vanished'])
