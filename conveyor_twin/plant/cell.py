@@ -34,8 +34,9 @@ class PlantCellCore:
     """A cell of a plant with the ends of its links.
 
     :param plant: the validated plant. :param name: the cell's name in it.
-    :param run: id of this run of the cell (reported to upstream cells; a restarted cell
-        process takes another so they send again what it never inserted).
+    :param run: id of this run of the cell (sent to its neighbours: a restarted cell process
+        takes another, so upstream cells send again what it never inserted and downstream
+        cells follow its new numbering of parts and steps).
     :param check_balance: check the cell's part ledger every step (see ``build_twin``).
     :param twin: the composed twin of the cell to step (one a ROS layer built, with its
         streams); None: build one.
@@ -55,7 +56,7 @@ class PlantCellCore:
             self.spec.cell, seed=self.spec.seed, check_balance=check_balance)
         sim = self.twin.micro.sim
         sim.state.counters[C_NEXT_ID] = self.spec.index * ID_RANGE + 1
-        self.exits: List[LinkExit] = [LinkExit(k) for k in plant.links_from(name)]
+        self.exits: List[LinkExit] = [LinkExit(k, run) for k in plant.links_from(name)]
         self.entries: List[LinkEntry] = [LinkEntry(k, run) for k in plant.links_to(name)]
         self._radius = sim.pt[:, PT_BRAD].copy()  # bounding radius per part type [m]
         self._origin: Dict[int, int] = {}

@@ -17,7 +17,7 @@ travels between processes (:mod:`conveyor_twin.ros.plant_node`) or is handed ove
 from bisect import bisect_right
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Callable, Deque, List, NamedTuple, Optional, Tuple
+from typing import Callable, Deque, List, NamedTuple, Optional, Set, Tuple
 
 from conveyor_twin.plant.model import Link
 
@@ -49,13 +49,15 @@ class Transit(NamedTuple):
 @dataclass
 class Departures:
     """Exit to entry: parts that left (``seq`` consecutive from ``first_seq``), the exit cell's
-    completed step, and its oldest part not yet reported inserted (``held_from``)."""
+    completed step, its oldest part not yet reported inserted (``held_from``) and the id of
+    the exit cell's run (``seq`` and steps count from 0 in every run)."""
 
     link: str
     through: int
     first_seq: int
     held_from: int
     parts: List[Transit] = field(default_factory=list)
+    run: int = 0
 
 
 @dataclass
@@ -63,7 +65,9 @@ class Acceptances:
     """Entry to exit: parts inserted (``seq`` and the step of insertion, in order), the entry
     cell's completed step, the id of the entry cell's current run (a restarted cell has
     another), and whether the entry still waits for the exit's oldest held part
-    (``starting``: the exit then sends every part it holds)."""
+    (``starting``: the exit then sends every part it holds). ``exit_run``: the run of the
+    exit cell whose parts the entry takes (None: none yet); ``seq`` numbers its parts, and
+    ``through`` and ``step`` count in its steps."""
 
     link: str
     through: int
@@ -71,16 +75,19 @@ class Acceptances:
     seq: List[int] = field(default_factory=list)
     step: List[int] = field(default_factory=list)
     starting: bool = False
+    exit_run: Optional[int] = None
 
 
 class LinkExit:
     """The upstream end of a link: takes, numbers, sends and holds parts.
 
     :param link: the link.
+    :param run: id of this run of the exit cell (a restarted cell has another).
     """
 
-    def __init__(self, link: Link) -> None:
+    def __init__(self, link: Link, run: int = 0) -> None:
         self.link = link
+        self.run = run
         self.delay = link.delay_steps
         self.capacity = link.capacity
         #: Steps completed by the cell here and by the entry's cell.
@@ -128,7 +135,7 @@ class LinkExit:
         parts, self._outgoing = self._outgoing, []
         self._first_unsent = first + len(parts)
         held_from = self.held[0].seq if self.held else self.sent
-        return Departures(self.link.name, self.through, first, held_from, parts)
+        return Departures(self.link.name, self.through, first, held_from, parts, self.run)
 
     def _send_held(self) -> None:
         """Make the next batch start at the oldest held part."""
@@ -146,8 +153,11 @@ class LinkExit:
         A report from another run of the entry cell (restarted) makes every held part go
         out again (the new run starts empty and takes them from the oldest on); so does a
         report of an entry still ``starting`` (its first batch was lost before the two ends
-        had found each other).
+        had found each other). A report about another run of this exit cell (an earlier one,
+        before the entry heard of this run) says nothing about this run's parts or steps.
         """
+        if batch.exit_run is not None and batch.exit_run != self.run:
+            return
         if self.peer_run is not None and batch.run != self.peer_run:
             self._accepted_before += len(self._accepted_steps)
             self._accepted_steps = []
@@ -170,6 +180,13 @@ class LinkExit:
 class LinkEntry:
     """The downstream end of a link: receives parts in order and inserts them when due.
 
+    The entry follows one run of the exit cell at a time. When a batch of another run comes
+    (the exit cell restarted: it numbers parts and counts steps from 0 again), the parts of the
+    earlier run that wait in the queue are dropped (they were lost with that run; counted in
+    :attr:`dropped`), and the new run's steps count from this cell's step at that moment
+    (:attr:`offset`): its step ``k`` is this cell's step ``offset + k``. Batches of an earlier
+    run that come later are ignored.
+
     :param link: the link.
     :param run: id of this run of the entry cell (changes when the cell restarts).
     """
@@ -179,17 +196,50 @@ class LinkEntry:
         self.delay = link.delay_steps
         self.run = run
         self.through = 0
+        #: Steps the exit cell has completed, in this cell's steps.
         self.peer_through = 0
         self.queue: Deque[Transit] = deque()
         self.expected: Optional[int] = None
+        #: Parts inserted (from every run of the exit cell) [parts].
         self.inserted = 0
+        #: The run of the exit cell whose parts the entry takes (None: none heard yet).
+        self.peer_run: Optional[int] = None
+        #: This cell's step where the exit cell's current run began [steps] (0 for the run
+        #: heard first).
+        self.offset = 0
+        #: Of :attr:`inserted`, parts of earlier runs of the exit cell [parts].
+        self.earlier = 0
+        #: Parts of earlier runs of the exit cell received and never inserted [parts].
+        self.dropped = 0
+        self._ended_runs: Set[int] = set()
         self._seq: List[int] = []
         self._step: List[int] = []
+
+    def _follow(self, run: int) -> None:
+        """Drop what is left of the exit cell's current run and follow ``run``."""
+        if self.peer_run is not None:
+            self._ended_runs.add(self.peer_run)
+            self.dropped += len(self.queue)
+            self.queue.clear()
+            self.earlier = self.inserted
+            self.offset = self.through
+            self.peer_through = self.through
+            self.expected = None
+            self._seq, self._step = [], []   # their exit run is gone: nobody to tell
+        self.peer_run = run
 
     def receive(self, batch: Departures) -> None:
         """Take a batch of departures: parts in sequence are queued, repeats ignored; a fresh
         entry starts with the batch that begins at the exit's oldest held part (until then it
-        learns nothing from the exit, not even how far it ran: it may not step)."""
+        learns nothing from the exit, not even how far it ran: it may not step). A batch of
+        another run of the exit cell starts following that run (see the class docstring).
+
+        :raises ValueError: if a part is missing between two batches of one run.
+        """
+        if batch.run in self._ended_runs:
+            return
+        if batch.run != self.peer_run:
+            self._follow(batch.run)
         if self.expected is None:
             if batch.first_seq != batch.held_from:
                 return
@@ -202,7 +252,7 @@ class LinkEntry:
                                  f'{self.expected} expected (a batch was lost)')
             self.queue.append(part)
             self.expected += 1
-        self.peer_through = max(self.peer_through, batch.through)
+        self.peer_through = max(self.peer_through, batch.through + self.offset)
 
     def insert(self, step: int, place: Callable[[Transit], int]) -> Tuple[int, int]:
         """Insert the parts due at ``step`` in order until one does not fit.
@@ -212,7 +262,8 @@ class LinkEntry:
         """
         done = 0
         queue = self.queue
-        while queue and queue[0].step + self.delay <= step:
+        due = step - self.delay - self.offset   # the latest leave step due now
+        while queue and queue[0].step <= due:
             if not place(queue[0]):
                 break
             part = queue.popleft()
@@ -225,16 +276,20 @@ class LinkEntry:
     def waiting(self, step: int) -> int:
         """Parts due by ``step`` and not inserted: the backlog [parts]."""
         n = 0
+        due = step - self.delay - self.offset
         for part in self.queue:
-            if part.step + self.delay > step:
+            if part.step > due:
                 break
             n += 1
         return n
 
     def batch(self) -> Acceptances:
-        """Return the insertions not reported yet with the current ``through``."""
-        out = Acceptances(self.link.name, self.through, self.run, self._seq, self._step,
-                          starting=self.expected is None)
+        """Return the insertions not reported yet with the current ``through`` (both in the
+        steps of the exit cell's current run)."""
+        off = self.offset
+        out = Acceptances(self.link.name, self.through - off, self.run, self._seq,
+                          [s - off for s in self._step] if off else self._step,
+                          starting=self.expected is None, exit_run=self.peer_run)
         self._seq, self._step = [], []
         return out
 

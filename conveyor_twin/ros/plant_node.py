@@ -96,6 +96,7 @@ def departures_msg(batch: Departures, time_ns: int) -> 'PartTransfer':
     m.header.frame_id = batch.link
     m.link, m.through = batch.link, batch.through
     m.first_seq, m.held_from = batch.first_seq, batch.held_from
+    m.run = batch.run
     p = batch.parts
     m.step_left = [t.step for t in p]
     m.id = [t.id for t in p]
@@ -113,7 +114,8 @@ def departures_of(m: 'PartTransfer') -> Departures:
              for i, (s, pid, o, t, x, y, a, vx, vy, w) in enumerate(zip(
                  m.step_left, m.id, m.origin_id, m.part_type, m.x, m.y, m.yaw, m.vx, m.vy,
                  m.wz))]
-    return Departures(m.link, int(m.through), int(m.first_seq), int(m.held_from), parts)
+    return Departures(m.link, int(m.through), int(m.first_seq), int(m.held_from), parts,
+                      int(m.run))
 
 
 def acceptances_msg(batch: Acceptances, time_ns: int) -> 'TransferAccepted':
@@ -124,13 +126,16 @@ def acceptances_msg(batch: Acceptances, time_ns: int) -> 'TransferAccepted':
     m.link, m.through, m.run = batch.link, batch.through, batch.run
     m.seq, m.step = list(batch.seq), list(batch.step)
     m.starting = batch.starting
+    m.exit_run_known = batch.exit_run is not None
+    m.exit_run = batch.exit_run if batch.exit_run is not None else 0
     return m
 
 
 def acceptances_of(m: 'TransferAccepted') -> Acceptances:
     """Return the batch of acceptances a ``TransferAccepted`` message carries."""
     return Acceptances(m.link, int(m.through), int(m.run), [int(s) for s in m.seq],
-                       [int(s) for s in m.step], starting=bool(m.starting))
+                       [int(s) for s in m.step], starting=bool(m.starting),
+                       exit_run=int(m.exit_run) if m.exit_run_known else None)
 
 
 def progress_msg(core: PlantCellCore, *, end_step: int, done: bool, stats: StepStats,
@@ -152,6 +157,8 @@ def progress_msg(core: PlantCellCore, *, end_step: int, done: bool, stats: StepS
     m.entry_link = [e.link.name for e in core.entries]
     m.entry_inserted = [e.inserted for e in core.entries]
     m.entry_waiting = list(core.waiting)
+    m.entry_earlier = [e.earlier for e in core.entries]
+    m.entry_dropped = [e.dropped for e in core.entries]
     m.step_time_mean_ms = stats.total()['mean_ms'] if stats.count else 0.0
     m.real_time_factor = rtf
     m.state_hash = core.state_hash() if with_hash else ''
@@ -163,27 +170,43 @@ def ledger_of(reports: Dict[str, 'CellProgress'],
     """Return the plant-wide ledger from the latest report of every cell and the last reports
     of cell runs that ended (a process killed or restarted).
 
-    A link's parts are as its exit cell reports them: sent, and inserted as the entry
-    reported to the exit (the rest the exit still holds). A run that ended keeps what entered
-    and left through it; ``lost`` is what it held at its last report plus what it inserted
-    and reported to the exit after that report (what it inserted and did not report, the exit
-    still holds and sends to the next run). Exact for reports of the same step.
+    A link's parts are as its exit cell's current run reports them: sent, and inserted as the
+    entry reported to the exit (the rest the exit still holds). A run that ended keeps what
+    entered and left through it; what it held is ``lost``:
+
+    - what was in the cell at its last report;
+    - as an entry cell: what it inserted and reported to the exit after that report (what it
+      inserted and did not report, the exit still holds and sends to the next run);
+    - as an exit cell: what it sent by its last report less what the entry inserted of the
+      parts of ended runs (the rest the entry dropped, or never received).
+
+    If that sum is negative for a cell (parts that entered a source cell after its last
+    report reached the next cell), it counts as entered instead. Exact for reports of the
+    same step and one restarted cell per link at a time.
     """
     cells: Dict[str, Dict[str, float]] = {}
-    reported: Dict[str, int] = {}
+    reported: Dict[str, int] = {}      # per link: insertions of the current exit run's parts
+    earlier: Dict[str, int] = {}       # per link: insertions of ended exit runs' parts
     waiting: Dict[str, int] = {}
-    ended_links = set()
-    lost = 0.0
+    net: Dict[str, float] = {}         # per cell with ended runs: what they held
+    ended_links: Dict[str, str] = {}   # link -> its entry cell, for ended entry runs
+    ended_sent: Dict[str, int] = {}    # link -> sent by ended exit runs
+    ended_exit: Dict[str, str] = {}    # link -> its exit cell, for ended exit runs
     for m in (*ended, *reports.values()):
         current = reports.get(m.cell) is m
         key = m.cell if current else f'{m.cell}#{m.run}'
         cells[key] = {'entered': m.entered, 'in_cell': m.in_cell if current else 0.0,
                       'left': m.left, 'vanished': m.vanished}
         if not current:
-            lost += m.in_cell
-            ended_links.update(m.entry_link)
-        for name, n, w in zip(m.entry_link, m.entry_inserted, m.entry_waiting):
-            reported[name] = reported.get(name, 0) + int(n)
+            net[m.cell] = net.get(m.cell, 0.0) + m.in_cell
+            ended_links.update((name, m.cell) for name in m.entry_link)
+            for name, sent in zip(m.exit_link, m.exit_sent):
+                ended_sent[name] = ended_sent.get(name, 0) + int(sent)
+                ended_exit[name] = m.cell
+        for name, n, w, e in zip(m.entry_link, m.entry_inserted, m.entry_waiting,
+                                 m.entry_earlier or [0] * len(m.entry_link)):
+            reported[name] = reported.get(name, 0) + int(n) - int(e)
+            earlier[name] = earlier.get(name, 0) + int(e)
             if current:
                 waiting[name] = int(w)
     links = {}
@@ -192,7 +215,17 @@ def ledger_of(reports: Dict[str, 'CellProgress'],
                                         m.exit_resent):
             links[name] = LinkCounts(int(sent), int(acc), waiting.get(name, 0), int(res))
             if name in ended_links:
-                lost += max(0, int(acc) - reported.get(name, 0))
+                cell = ended_links[name]
+                net[cell] += max(0, int(acc) - reported.get(name, 0))
+    for name, cell in ended_exit.items():
+        net[cell] += ended_sent[name] - earlier.get(name, 0)
+    lost = 0.0
+    for cell, held in net.items():
+        if held >= 0:
+            lost += held
+        else:
+            cells[f'{cell}#unreported'] = {'entered': -held, 'in_cell': 0.0, 'left': 0.0,
+                                           'vanished': 0.0}
     return PlantLedger(cells, links, lost)
 
 

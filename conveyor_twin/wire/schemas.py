@@ -425,6 +425,8 @@ _PARTTRANSFER = (
     'uint64 first_seq        # number of the first part here in the link; the others follow [1]\n'
     'uint64 held_from        # number of the oldest part the exit still holds (not reported\n'
     '                        # inserted; a restarted entry cell starts from it) [1]\n'
+    "uint64 run              # id of the exit cell's run: a restarted exit cell numbers parts\n"
+    '                        # and counts steps from 0 again, under another id [1]\n'
     'uint64[] step_left      # step in which the part left the exit cell [1]\n'
     "uint32[] id             # the part's id in the exit cell [1]\n"
     "uint32[] origin_id      # the part's id where it entered the plant [1]\n"
@@ -444,11 +446,14 @@ _TRANSFERACCEPTED = (
     '\n'
     "std_msgs/Header header  # stamp: simulation time of `through`; frame_id: the link's name\n"
     "string link             # the link's name in the plant file\n"
-    'uint64 through          # steps the entry cell has completed [1]\n'
+    "uint64 through          # steps the entry cell has completed (in exit_run's steps) [1]\n"
     "uint64 run              # id of the entry cell's current run; another id means it\n"
     '                        # restarted empty [1]\n'
     "bool starting           # the entry has not received the exit's oldest held part yet (a\n"
     '                        # fresh run): the exit sends every part it holds (again)\n'
+    "uint64 exit_run         # the exit cell's run whose parts `seq` numbers and in whose steps\n"
+    '                        # `through` and `step` count (see exit_run_known) [1]\n'
+    'bool exit_run_known     # false: the entry has heard of no run of the exit cell yet\n'
     'uint64[] seq            # number of each inserted part in the link, ascending [1]\n'
     'uint64[] step           # step in which it was inserted [1]\n'
 )
@@ -474,6 +479,8 @@ _CELLPROGRESS = (
     'string[] entry_link     # the links that feed this cell\n'
     'uint64[] entry_inserted # parts inserted from each [1]\n'
     'uint64[] entry_waiting  # parts due and waiting because the entry is occupied [1]\n'
+    'uint64[] entry_earlier  # of entry_inserted, parts of earlier runs of the exit cell [1]\n'
+    'uint64[] entry_dropped  # parts of earlier exit cell runs received, never inserted [1]\n'
     'float64 step_time_mean_ms  # mean wall time of a step since the start [ms]\n'
     'float64 real_time_factor   # simulated over wall time since the start [1]\n'
     "string state_hash       # SHA-256 of the cell's state and of every part it sent (see docs)\n"

@@ -101,3 +101,34 @@ def test_the_rule_waits_for_upstream_and_for_a_full_links_downstream():
     assert may_step(15, [e], [free]) and not may_step(16, [e], [free])
     bounded.peer_through = 7
     assert horizon([e], [free, bounded]) == 10
+
+
+def test_an_entry_follows_a_restarted_exit_and_drops_what_the_old_run_left():
+    old, e = LinkExit(link(2), run=1), LinkEntry(link(2), run=7)
+    for k in range(3):
+        old.add(part(k, 1))
+    old.through = 3
+    e.receive(old.batch())
+    e.insert(3, lambda p: 1 if p.seq == 0 else 0)
+    e.through = 5
+    old.receive(e.batch())
+    assert old.accepted == 1
+    new = LinkExit(link(2), run=2)            # the exit cell restarted: seq and steps from 0
+    new.add(part(0, 1))
+    new.through = 1
+    new.receive(e.batch())                    # about run 1: says nothing about run 2
+    assert new.peer_through == 0 and len(new.held) == 1
+    e.receive(new.batch())
+    assert (e.peer_run, e.offset, e.earlier, e.dropped) == (2, 5, 1, 2)
+    assert [p.seq for p in e.queue] == [0] and e.peer_through == 6
+    old.add(part(3, 4))
+    e.receive(old.batch())                    # late batch of the ended run: ignored
+    assert [p.seq for p in e.queue] == [0]
+    assert e.insert(7, lambda p: 1) == (0, 0)  # left at 1 in run 2's steps: due at 5 + 1 + 2
+    assert e.insert(8, lambda p: 1) == (1, 0)
+    e.through = 8
+    back = e.batch()
+    assert (back.exit_run, back.through, back.seq, back.step) == (2, 3, [0], [3])
+    new.receive(back)
+    assert new.accepted == 1 and not new.held and new.peer_through == 3
+    assert e.inserted == 2
