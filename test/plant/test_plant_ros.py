@@ -61,55 +61,76 @@ def test_composed_cli_gives_the_same_bits(ros_processes):
     assert summary['state_hashes'] == reference_hashes()[0]
 
 
+class KilledCell:
+    """The chain's three cells in processes of their own (``--cell``), a monitor, and every
+    ``TransferAccepted`` of one link as (entry run, exit run, seq)."""
+
+    END = '60.0'  # s simulated: long enough for the kill and the restart in any load
+
+    def __init__(self, context, processes, link: str) -> None:
+        from conveyor_twin import contract
+        from conveyor_twin.ros.plant_node import PlantMonitor, TransferAccepted
+        from conveyor_twin.ros.qos import to_rclpy
+        self.plant = load_plant(CHAIN)
+        self.processes = processes
+        self.link_name = link
+        self.monitor = PlantMonitor(self.plant, context=context)
+        self.executor = make_executor(context)
+        self.executor.add_node(self.monitor.node)
+        self.accepted = []
+        self.monitor.node.create_subscription(
+            TransferAccepted, contract.link_topic(contract.TRANSFER_ACCEPTED,
+                                                  self.plant.namespace, link),
+            lambda m: self.accepted.extend((m.run, m.exit_run, int(s)) for s in m.seq),
+            to_rclpy(contract.PLANT_QOS))
+
+    def start(self, cell: str, run: int) -> subprocess.Popen:
+        return self.processes.start(cli(str(CHAIN), '--cell', cell, '--no-streams', '--hold',
+                                        '--duration', self.END, '--run-id', str(run)),
+                                    stdout=subprocess.DEVNULL)
+
+    def link(self):
+        return self.monitor.ledger().links.get(self.link_name)
+
+    def wait(self, condition) -> None:
+        assert wait_for(condition, TIMEOUT, self.executor), self.monitor.ledger().text()
+
+    def kill(self, proc: subprocess.Popen) -> None:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+    def finish(self) -> None:
+        """Wait until every cell is done and the last reports came."""
+        self.wait(self.monitor.all_done)
+        wait_for(lambda: False, 0.5, self.executor)
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=2.0)
+        self.monitor.destroy()
+
+
 def test_a_killed_cell_leaves_its_parts_in_the_link_and_a_restart_gets_them(
         ros_context, ros_processes):
-    from conveyor_twin.ros.plant_node import PlantMonitor
-    plant = load_plant(CHAIN)
-    monitor = PlantMonitor(plant, context=ros_context)
-    executor = make_executor(ros_context)
-    executor.add_node(monitor.node)
-    accepted = []
-    from conveyor_twin.ros.plant_node import TransferAccepted
-    from conveyor_twin import contract
-    from conveyor_twin.ros.qos import to_rclpy
-    monitor.node.create_subscription(
-        TransferAccepted, contract.link_topic(contract.TRANSFER_ACCEPTED, plant.namespace,
-                                              'first_second'),
-        lambda m: accepted.extend((m.run, int(s)) for s in m.seq),
-        to_rclpy(contract.PLANT_QOS))
-    end = '60.0'  # s simulated: long enough for the kill and the restart in any load
-
-    def start(cell: str, run: int) -> subprocess.Popen:
-        return ros_processes.start(cli(str(CHAIN), '--cell', cell, '--no-streams', '--hold',
-                                       '--duration', end, '--run-id', str(run)),
-                                   stdout=subprocess.DEVNULL)
-
-    def link():
-        return monitor.ledger().links.get('first_second')
-
+    plant = KilledCell(ros_context, ros_processes, 'first_second')
+    monitor = plant.monitor
     try:
-        start('feeder', 1)
-        start('first', 1)
-        second = start('second', 1)
+        plant.start('feeder', 1)
+        plant.start('first', 1)
+        second = plant.start('second', 1)
         # the monitor has heard the entry cell's run 1 after it inserted parts: the ledger
         # can count what dies with it
-        assert wait_for(lambda: link() is not None and 'second' in monitor.reports
-                        and monitor.reports['second'].entry_inserted[0] >= 3, TIMEOUT,
-                        executor), monitor.ledger().text()
-        os.killpg(second.pid, signal.SIGKILL)
-        second.wait()
-        before = link().sent
+        plant.wait(lambda: plant.link() is not None and 'second' in monitor.reports
+                   and monitor.reports['second'].entry_inserted[0] >= 3)
+        plant.kill(second)
+        before = plant.link().sent
         # the upstream cell runs on; what it sends stays in the link
-        assert wait_for(lambda: link().sent >= before + 5 or monitor.all_done(), TIMEOUT,
-                        executor)
-        held = link()
+        plant.wait(lambda: plant.link().sent >= before + 5 or monitor.all_done())
+        held = plant.link()
         assert held.held >= 1 and held.sent - held.inserted == held.held
-        start('second', 2)
-        assert wait_for(monitor.all_done, TIMEOUT, executor), monitor.ledger().text()
-        wait_for(lambda: False, 0.5, executor)  # the last reports
+        plant.start('second', 2)
+        plant.finish()
     finally:
-        executor.shutdown(timeout_sec=2.0)
-        monitor.destroy()
+        plant.close()
     ledger = monitor.ledger()
     final = ledger.links['first_second']
     assert final.resent >= 1, ledger.text()
@@ -118,10 +139,46 @@ def test_a_killed_cell_leaves_its_parts_in_the_link_and_a_restart_gets_them(
     # no part of the link was reported inserted twice, by one run or the other (reports that
     # came before this subscriber discovered a run's publisher are not seen), and the last
     # part reported is the last the exit counts as inserted
-    seqs = sorted(s for _, s in accepted)
-    assert len(seqs) == len(set(seqs)), accepted
+    seqs = sorted(s for _, _, s in plant.accepted)
+    assert len(seqs) == len(set(seqs)), plant.accepted
     assert seqs[-1] + 1 == final.inserted == final.sent - final.held
-    assert 2 in {run for run, _ in accepted}
+    assert 2 in {run for run, _, _ in plant.accepted}
+
+
+def test_a_killed_feeding_cell_restarts_and_the_next_cell_takes_its_new_parts(
+        ros_context, ros_processes):
+    plant = KilledCell(ros_context, ros_processes, 'first_second')
+    monitor = plant.monitor
+    try:
+        plant.start('feeder', 1)
+        first = plant.start('first', 1)
+        plant.start('second', 1)
+        # the monitor has heard the middle cell's run 1 after the last cell inserted parts
+        # of it: the ledger can count what dies with it
+        plant.wait(lambda: 'first' in monitor.reports and 'second' in monitor.reports
+                   and monitor.reports['second'].entry_inserted[0] >= 3)
+        plant.kill(first)
+        plant.start('first', 2)
+        plant.finish()
+    finally:
+        plant.close()
+    ledger = monitor.ledger()
+    assert [m.run for m in monitor.ended] == [1] and monitor.reports['first'].run == 2
+    assert ledger.residual == 0.0, ledger.text()
+    assert ledger.lost > 0, ledger.text()       # run 1 had parts on its belt
+    last = monitor.reports['second']
+    # the last cell inserted parts of both runs of the middle cell, each part once
+    assert 0 < last.entry_earlier[0] < last.entry_inserted[0], last
+    by_run = {}
+    for entry_run, exit_run, seq in plant.accepted:
+        assert entry_run == 1
+        by_run.setdefault(exit_run, []).append(seq)
+    assert set(by_run) == {1, 2}, plant.accepted
+    for seqs in by_run.values():
+        assert seqs == sorted(set(seqs)), plant.accepted
+    # run 2's parts are numbered from 0 and every one the exit counts inserted was reported
+    final = ledger.links['first_second']
+    assert by_run[2][-1] + 1 == final.inserted == final.sent - final.held
 
 
 def test_a_bad_plant_file_exits_2_before_anything_starts(tmp_path):
@@ -155,6 +212,29 @@ def test_ledger_of_a_restarted_cell_counts_what_died_with_it():
     assert ledger.links['ab'].held == 2 and ledger.links['ab'].waiting == 1
     assert ledger.in_cells == 12 and ledger.left == 2 and ledger.residual == 0.0
     assert ledger_of({'a': up, 'b': new}).lost == 0.0
+
+
+def test_ledger_of_a_restarted_feeding_cell_counts_what_its_link_dropped():
+    from conveyor_twin.ros.plant_node import CellProgress, ledger_of
+    # run 1 of `a` had 4 parts in the cell and had sent 10 at its last report; `b` inserted
+    # 7 of them (the other 3 were dropped or never came); run 2 sent 5, 2 inserted
+    old = CellProgress(cell='a', run=1, entered=14.0, in_cell=4.0, exit_link=['ab'],
+                       exit_sent=[10], exit_accepted=[6], exit_resent=[0])
+    new = CellProgress(cell='a', run=2, entered=8.0, in_cell=3.0, exit_link=['ab'],
+                       exit_sent=[5], exit_accepted=[2], exit_resent=[0])
+    down = CellProgress(cell='b', run=1, in_cell=6.0, left=3.0, entry_link=['ab'],
+                        entry_inserted=[9], entry_waiting=[0], entry_earlier=[7],
+                        entry_dropped=[2])
+    ledger = ledger_of({'a': new, 'b': down}, [old])
+    assert ledger.lost == 4 + (10 - 7)
+    assert ledger.in_links == 3 and ledger.residual == 0.0
+    # run 1 sent more after its last report than it held then: parts entered unreported
+    down.entry_earlier = [15]
+    down.entry_inserted = [17]
+    down.in_cell = 14.0
+    ledger = ledger_of({'a': new, 'b': down}, [old])
+    assert ledger.lost == 0 and ledger.cells['a#unreported']['entered'] == 1
+    assert ledger.residual == 0.0
 
 
 def test_composed_plant_records_every_cell(ros_processes, tmp_path):
