@@ -22,15 +22,16 @@ import subprocess
 import sys
 import tempfile
 import time
-from typing import Dict, List
+from typing import Callable, Dict, List, Optional
 
 DEFAULT_SIZES = (1, 2, 4, 8)
 DEFAULT_DURATION = 20.0   # s simulated per run
 DEFAULT_ROUNDS = 1
 FEED_RATE = 40.0          # parts/s into the first cell
 DELAY = 0.1               # s, every link
+STEP = 0.001              # s, every cell's step
 
-_CELL = '''cell: {{name: {name}, step: 0.001, seed: 1}}
+_CELL = '''cell: {{name: {name}, step: %r, seed: 1}}
 belts:
   - {{name: main, start: [0.0, 0.0], end: [0.4, 0.0], width: 0.2, speed: 1.0, max_speed: 2.0,
      acceleration: 5.0, friction: 0.4}}
@@ -42,7 +43,7 @@ part_types:
 {sources}sinks:
   - {{name: exit, region: [0.38, -0.12, 0.5, 0.12]}}
 micro: {{capacity: 2000}}
-'''
+''' % STEP
 _SOURCE = '''sources:
   - {{name: feed, part_type: disc, region: [0.02, -0.08, 0.08, 0.08], rate: {rate},
      pattern: poisson, velocity: belt, yaw: random}}
@@ -80,7 +81,8 @@ def one_process(path: Path, duration: float) -> Dict[str, float]:
     runner.run_to(steps)
     wall = time.perf_counter() - t0
     ledger = runner.ledger()
-    assert ledger.residual == 0.0, ledger.text()
+    if ledger.residual != 0.0:
+        raise RuntimeError(f'plant run lost or duplicated parts:\n{ledger.text()}')
     sim = (steps - 10) * plant.step
     return {'wall_s': wall, 'rtf': sim / wall, 'left': ledger.left,
             'parts_per_s': ledger.left / wall,
@@ -101,15 +103,23 @@ def processes(path: Path, duration: float) -> Dict[str, float]:
     rtf = min(summary['cells_rtf'].values())
     wall = duration / rtf
     left = summary['ledger']['left']
-    assert summary['ledger']['residual'] == 0.0, summary['ledger']
+    if summary['ledger']['residual'] != 0.0:
+        raise RuntimeError(f"plant run lost or duplicated parts: {summary['ledger']}")
     cells = summary['cells']
     return {'wall_s': wall, 'rtf': rtf, 'left': left, 'parts_per_s': left / wall,
-            'cell_steps_per_s': cells * duration / 1e-3 / wall,
+            'cell_steps_per_s': cells * duration / STEP / wall,
             'wall_with_start_s': summary['wall_s']}
 
 
-def run(sizes: List[int], duration: float, rounds: int, on_row=None) -> Dict:
-    """Run every size in both layouts ``rounds`` times; return medians per size."""
+def run(sizes: List[int], duration: float, rounds: int,
+        on_row: Optional[Callable[[int, Dict], None]] = None) -> Dict:
+    """Run every size in both layouts ``rounds`` times; return medians per size.
+
+    :param sizes: the numbers of cells of the chains to run.
+    :param duration: simulated time of every run [s].
+    :param rounds: runs per size and layout (the medians are over these).
+    :param on_row: called with each size and its row once it is measured.
+    """
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         for n in sizes:

@@ -86,8 +86,13 @@ def inside(f: EndFrame, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return (u >= f.x0) & (u <= f.x1) & (np.abs(v) <= f.half_width)
 
 
-def to_link(f: EndFrame, x, y, yaw, vx, vy) -> Tuple[np.ndarray, ...]:
-    """Express cell-frame poses [m, rad] and velocities [m/s] in the exit's link frame."""
+def to_link(f: EndFrame, x: np.ndarray, y: np.ndarray, yaw: np.ndarray, vx: np.ndarray,
+            vy: np.ndarray) -> Tuple[np.ndarray, ...]:
+    """Express cell-frame poses [m, rad] and velocities [m/s] in the exit's link frame.
+
+    :return: (x, y, yaw, vx, vy) in the link frame [m, m, rad, m/s, m/s], each array of the
+        shape of the inputs.
+    """
     c, s = math.cos(f.yaw), math.sin(f.yaw)
     dx, dy = x - f.x, y - f.y
     return (c * dx + s * dy, -s * dx + c * dy, np.arctan2(np.sin(yaw - f.yaw),

@@ -103,20 +103,14 @@ def _end(r: _PlantReader, cells: Dict[str, PlantCell], exit_side: bool) -> LinkE
                      f'{where}')
     kind = given[0]
     end = LinkEnd(cell=name)
-    if kind == 'sink':
-        sink = r.string('sink')
-        names = [s.name for s in cell.sinks]
-        if sink not in names:
-            raise r.fail('sink', sink, f'a sink of cell {name!r}: ' + ', '.join(names))
-        end = replace(end, sink=sink)
-    elif kind == 'belt':
-        belt = r.string('belt')
-        names = [b.name for b in cell.belts]
-        if belt not in names:
-            raise r.fail('belt', belt, f'a belt of cell {name!r}: ' + ', '.join(names))
-        end = replace(end, belt=belt)
-    else:
+    if kind == 'region':
         end = replace(end, region=r.rect('region'))
+    else:
+        value = r.string(kind)
+        names = [x.name for x in (cell.sinks if kind == 'sink' else cell.belts)]
+        if value not in names:
+            raise r.fail(kind, value, f'a {kind} of cell {name!r}: ' + ', '.join(names))
+        end = replace(end, **{kind: value})
     r.done()
     return end
 
