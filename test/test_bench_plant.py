@@ -35,10 +35,12 @@ def test_tiny_run_of_both_layouts(capsys):
         for layout in ('one_process', 'processes'):
             figures = row[layout]
             assert figures['rtf'] > 0.0 and figures['cell_steps_per_s'] > 0.0
-            assert figures['left'] >= 0.0 and figures['parts_per_s'] >= 0.0
+            assert figures['parts_per_s'] == pytest.approx(figures['left'] / figures['wall_s'])
         assert row['speedup'] == pytest.approx(row['processes']['rtf']
                                                / row['one_process']['rtf'])
     # the same plant, seed and steps: the same parts left the line in both layouts
     for row in report['sizes'].values():
         assert row['one_process']['left'] == row['processes']['left']
+    # seeded: parts of the one cell's first 0.2 s reached its exit in 0.5 s
+    assert report['sizes']['1']['one_process']['left'] > 0
     assert set(report['stops_scaling']) == {'one_process', 'processes'}

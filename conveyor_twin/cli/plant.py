@@ -222,6 +222,14 @@ def main(argv: List[str]) -> int:
     except CellError as exc:
         print(f'conveyor-twin plant: {exc}', file=sys.stderr)
         return 2
+    if args.duration < 0 or args.duration != args.duration:
+        print(f'conveyor-twin plant: --duration: got {args.duration}; expected a number of '
+              'seconds >= 0 (0: until Ctrl-C)', file=sys.stderr)
+        return 2
+    if args.run_id is not None and not 0 <= args.run_id < 1 << 64:
+        print(f'conveyor-twin plant: --run-id: got {args.run_id}; expected an integer in '
+              '[0, 2^64)', file=sys.stderr)
+        return 2
     if args.record and args.no_streams:
         print('conveyor-twin plant: --record needs the cells\' streams (not --no-streams)',
               file=sys.stderr)

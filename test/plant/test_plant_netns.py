@@ -26,7 +26,9 @@ SCRIPT = '''set -e
 ip link set lo up
 ip link add va type veth peer name vb
 unshare -n sleep {timeout} & HOLDER=$!
-sleep 0.3
+# the holder has its own network namespace once unshare has run (no fixed wait: a loaded
+# machine may take long)
+while [ "$(readlink /proc/$HOLDER/ns/net)" = "$(readlink /proc/$$/ns/net)" ]; do sleep 0.05; done
 ip link set vb netns $HOLDER
 ip addr add 10.77.0.1/24 dev va
 ip link set va up

@@ -192,6 +192,16 @@ def test_a_bad_plant_file_exits_2_before_anything_starts(tmp_path):
     assert proc.stdout == ''
 
 
+
+@pytest.mark.parametrize('args, message', [
+    (['--duration', '-1'], '--duration: got -1.0; expected a number of seconds >= 0'),
+    (['--cell', 'first', '--run-id', '-3'], '--run-id: got -3; expected an integer in [0,'),
+    (['--cell', 'third'], "no cell 'third' (cells: feeder, first, second)")])
+def test_bad_options_exit_2_before_anything_starts(args, message):
+    proc = subprocess.run(cli(str(CHAIN), *args), capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and message in proc.stderr and proc.stdout == ''
+
+
 def test_ledger_of_a_restarted_cell_counts_what_died_with_it():
     from conveyor_twin.ros.plant_node import CellProgress, ledger_of
 
