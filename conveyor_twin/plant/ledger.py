@@ -37,7 +37,8 @@ class PlantLedger:
 
     cells: Dict[str, Dict[str, float]] = field(default_factory=dict)
     links: Dict[str, LinkCounts] = field(default_factory=dict)
-    #: Parts that were in cell processes that ended (killed, restarted) at their last report.
+    #: Parts that died with cell runs that ended (killed, restarted): in the cell or in its
+    #: links (:func:`conveyor_twin.ros.plant_node.ledger_of`).
     lost: float = 0.0
 
     @property
