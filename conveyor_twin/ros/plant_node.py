@@ -20,7 +20,7 @@ publishes it on the plant's ``diagnostics`` (status ``conveyor_twin: plant``).
 from pathlib import Path
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence, Set, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy._rclpy_pybind11 import RCLError
@@ -579,6 +579,7 @@ class PlantMonitor:
         self.reports: Dict[str, 'CellProgress'] = {}
         #: The last report of every cell run that ended (another run of the cell reported).
         self.ended: List['CellProgress'] = []
+        self._ended_runs: Set[Tuple[str, int]] = set()
         self.node = Node('plant_monitor', namespace='/' + plant.namespace, context=context)
         self._sub = self.node.create_subscription(CellProgress, contract.CELL_PROGRESS.name,
                                                   self._on_progress,
@@ -588,9 +589,12 @@ class PlantMonitor:
                                                 to_rclpy(contract.PLANT_DIAGNOSTICS.qos))
 
     def _on_progress(self, msg: 'CellProgress') -> None:
+        if (msg.cell, msg.run) in self._ended_runs:
+            return  # a late report of a run that ended
         old = self.reports.get(msg.cell)
         if old is not None and old.run != msg.run:
             self.ended.append(old)
+            self._ended_runs.add((old.cell, old.run))
         self.reports[msg.cell] = msg
 
     def ledger(self) -> PlantLedger:

@@ -260,3 +260,15 @@ def test_composed_plant_records_every_cell(ros_processes, tmp_path):
         assert any(m.get('plant_cell') == name for m in meta.values()), meta
         steps = [m for m in read_messages(path, topics=[f'/{name}/parts'])]
         assert len(steps) == 300
+
+
+def test_the_monitor_ignores_a_late_report_of_an_ended_run(ros_context):
+    from conveyor_twin.ros.plant_node import CellProgress, PlantMonitor
+    monitor = PlantMonitor(load_plant(CHAIN), context=ros_context)
+    try:
+        for run, step in ((1, 10), (2, 5), (1, 11)):   # run 1's last report comes late
+            monitor._on_progress(CellProgress(cell='first', run=run, step=step))
+        assert [(m.run, m.step) for m in monitor.ended] == [(1, 10)]
+        assert (monitor.reports['first'].run, monitor.reports['first'].step) == (2, 5)
+    finally:
+        monitor.destroy()
