@@ -110,13 +110,13 @@ class _Reader:
 
     def section(self, key: str, required: bool = False) -> '_Reader':
         value = self.raw(key, _REQUIRED if required else {})
-        return _Reader(self.file, self.key_path(key), value)
+        return type(self)(self.file, self.key_path(key), value)   # a subclass reads on
 
     def items(self, key: str, required: bool = True) -> List['_Reader']:
         value = self.raw(key, _REQUIRED if required else [])
         if not isinstance(value, list) or (required and not value):
             raise self.fail(key, value, 'a non-empty list of mappings' if required else 'a list')
-        return [_Reader(self.file, self.key_path(key) + f'[{i}]', item)
+        return [type(self)(self.file, self.key_path(key) + f'[{i}]', item)
                 for i, item in enumerate(value)]
 
     def done(self) -> None:

@@ -24,7 +24,7 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 import yaml
 
 from conveyor_twin.cell.errors import CellError
-from conveyor_twin.cell.loader import _REQUIRED, _Reader, load_cell
+from conveyor_twin.cell.loader import _Reader, load_cell
 from conveyor_twin.cell.model import Cell, ZonePolicy
 from conveyor_twin.plant.errors import PlantError
 from conveyor_twin.plant.geometry import end_frame, end_rect
@@ -48,17 +48,6 @@ class _PlantReader(_Reader):
 
     def fail(self, key: Union[str, int], value: Any, expected: str) -> PlantError:
         return PlantError(self.file, self.key_path(key), value, expected)
-
-    def section(self, key: str, required: bool = False) -> '_PlantReader':
-        value = self.raw(key, _REQUIRED if required else {})
-        return _PlantReader(self.file, self.key_path(key), value)
-
-    def items(self, key: str, required: bool = True) -> List['_PlantReader']:
-        value = self.raw(key, _REQUIRED if required else [])
-        if not isinstance(value, list) or (required and not value):
-            raise self.fail(key, value, 'a non-empty list of mappings' if required else 'a list')
-        return [_PlantReader(self.file, self.key_path(key) + f'[{i}]', item)
-                for i, item in enumerate(value)]
 
     def name(self, key: str, default: Any = None) -> str:
         value = self.raw(key, default) if default is not None else self.raw(key)
