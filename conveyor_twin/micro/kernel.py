@@ -25,7 +25,8 @@ from conveyor_twin.micro.actuators import actuator_shapes, AP_LENGTH, AP_WIDTH
 from conveyor_twin.micro.contacts.broad_phase import update_pairs
 from conveyor_twin.micro.contacts.narrow_phase import detect
 from conveyor_twin.micro.contacts.response import (correct_positions, MODE_PENALTY, penalty_forces,
-                                                   prepare_contacts, solve_impulses)
+                                                   prepare_contacts, solve_impulses,
+                                                   warm_start)
 from conveyor_twin.micro.contacts.tables import A_INERTIA, MP_DT, MP_TRACK
 from conveyor_twin.micro.drive import belt_drive, ramp
 from conveyor_twin.micro.sensors import update_barriers
@@ -45,7 +46,8 @@ CF_MAX_SUB = 5        # most substeps per step
 CF_FLOOR_MU = 6
 CF_PASSES = 7         # impulse model: sweeps over the contacts (velocity and position)
 CF_SKIN = 8           # neighbour list skin [m] (see contacts.broad_phase.update_pairs)
-CF_COLUMNS = 9
+CF_POSITION_PASSES = 9  # impulse model: sweeps of the penetration correction
+CF_COLUMNS = 10
 
 # --- rows of the belt array ``belt_v`` (3, B) ---
 BV_TARGET = 0
@@ -113,7 +115,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
     belts, belt_v, apar, act_v, act_state, act_verts = drives
     gpar, gdim, cell_table, cell_items, part_cell, cand, nbr, pos0 = grid
     static_start, static_items, shp, shp_verts = statics
-    va, vb, out, ct, cidx, acc = contacts
+    va, vb, out, ct, cidx, acc, prev = contacts
     src, src_next, src_state, rng = sources
     sinks, sink_count, region, ob_id, ob_type, ob_P = exits
     lb, blocked, edge_count, last_part, ev_i, ev_f = barriers
@@ -134,6 +136,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
     key = W[4]
     na = apar.shape[0]
     passes = int(cfg[CF_PASSES])
+    position_passes = int(cfg[CF_POSITION_PASSES])
     skin = cfg[CF_SKIN]
     for _ in range(nsteps):
         step = counters[C_STEP] + 1
@@ -184,7 +187,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
             if update_pairs(n, ids, ptype, x, y, pt, gpar, gdim, cell_table, cell_items,
                             part_cell, cand, nbr, pos0, skin) == 2:
                 counters[C_CONTACTS_FULL] += 1
-            nc = detect(n, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items,
+            nc = detect(n, ids, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items,
                         shp, shp_verts, act_state, act_verts, va, vb, out, ct, cidx)
             if nc == ct.shape[0]:
                 counters[C_CONTACTS_FULL] += 1
@@ -196,8 +199,9 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                     vy[i] += h * fy[i] * pt[t, PT_INV_MASS]
                     wz[i] += h * tz[i] * pt[t, PT_INV_INERTIA]
             else:
-                prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp)
-                solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc)
+                prepare_contacts(nc, ct, cidx, ptype, pt, mp)
+                warm_start(n, nc, ct, cidx, ptype, vx, vy, wz, pt, prev, fx, fy, tz)
+                solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev)
             for i in range(n):
                 if impulse:
                     fx[i] = x[i]      # positions at detection, for correct_positions
@@ -212,7 +216,8 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                 yaw[i] = a
             if impulse:
                 # fx, fy hold the positions at detection
-                correct_positions(nc, ct, cidx, ptype, x, y, fx, fy, pt, passes, key, mp)
+                correct_positions(nc, ct, cidx, ptype, x, y, fx, fy, pt, position_passes, mp,
+                                  prev)
             if track:
                 for i in range(n):
                     t = ptype[i]

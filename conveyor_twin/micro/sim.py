@@ -34,7 +34,8 @@ from conveyor_twin.micro.geometry import (build_grid, cell_extent, obstacle_shap
 from conveyor_twin.micro.kernel import (AV_LIMIT, AV_POSITION, AV_PREVIOUS, AV_SUB, AV_TARGET,
                                         BV_LIMIT, BV_SPEED, BV_TARGET, CF_AUTO_SUB, CF_COLUMNS,
                                         CF_DT, CF_FLOOR_MU, CF_MAX_SUB, CF_MAX_TRAVEL, CF_MODE,
-                                        CF_PASSES, CF_PENALTY_DT, CF_SKIN, run_steps)
+                                        CF_PASSES, CF_PENALTY_DT, CF_POSITION_PASSES, CF_SKIN,
+                                        run_steps)
 from conveyor_twin.micro.sensors import (barrier_table, EV_BARRIER, EV_BLOCKED, EV_FLOAT_COLUMNS,
                                          EV_FRACTION, EV_INT_COLUMNS, EV_PART, EV_STEP, EV_TIME)
 from conveyor_twin.micro.sinks import OB_ROWS, remove_marked, RG_SIZE
@@ -54,6 +55,7 @@ PENALTY_OMEGA_DT = 0.5
 # as in a jam). 1 is Hoher et al.'s single pass; it does not hold a jam (discs overlap by up to a
 # diameter, see the docstring of contacts.response), so 2.
 CONTACT_PASSES = 2
+POSITION_PASSES = 2
 # Neighbour list skin as a fraction of the smallest part radius: a part may move 0.49 of it
 # before the list is rebuilt (in a jam it lives for many steps; in free flow at 0.5 m/s with
 # 10 mm discs and 1 ms steps it is rebuilt every fourth step). 0.8 against 0.4: the 1000-disc
@@ -118,7 +120,8 @@ class MicroSim:
 
     def __init__(self, cell: Cell, *, seed: int, region: Optional[Region] = None,
                  track_activity: Optional[bool] = None, auto_substeps: bool = True,
-                 event_capacity: int = EVENT_CAPACITY, passes: int = CONTACT_PASSES) -> None:
+                 event_capacity: int = EVENT_CAPACITY, passes: int = CONTACT_PASSES,
+                 position_passes: int = POSITION_PASSES) -> None:
         micro = cell.micro
         self.cell = cell
         self.seed = int(seed)
@@ -151,6 +154,7 @@ class MicroSim:
         self.cfg[CF_MAX_SUB] = MAX_SUBSTEPS_PENALTY if penalty else MAX_SUBSTEPS_IMPULSE
         self.cfg[CF_FLOOR_MU] = FLOOR_FRICTION
         self.cfg[CF_PASSES] = max(1, int(passes))
+        self.cfg[CF_POSITION_PASSES] = max(1, int(position_passes))
         self.cfg[CF_SKIN] = SKIN_FRACTION * r_min
         # belts
         self.belts = belt_table(cell.belts, self.dt)
@@ -179,7 +183,8 @@ class MicroSim:
         self._cell_items = np.zeros(cap, dtype=np.int64)
         self._part_cell = np.zeros(cap, dtype=np.int64)
         self._W = np.zeros((5, cap))
-        self._cand, self._va, self._vb, self._out, self._ct, self._cidx = scratch(cap)
+        (self._cand, self._va, self._vb, self._out, self._ct, self._cidx,
+         self._prev) = scratch(cap)
         self._nbr, self._pos0 = neighbour_arrays(cap)
         self.acc = np.zeros(A_COLUMNS)
         # sources, sinks, region
@@ -212,7 +217,7 @@ class MicroSim:
             (self.grid.gpar, self.grid.gdim, self._cell_table, self._cell_items,
              self._part_cell, self._cand, self._nbr, self._pos0),
             (self.grid.static_start, self.grid.static_items, self.shapes, self.shape_verts),
-            (self._va, self._vb, self._out, self._ct, self._cidx, self.acc),
+            (self._va, self._vb, self._out, self._ct, self._cidx, self.acc, self._prev),
             (self.src, self.src_next, self.src_state, self.rng),
             (self.sinks, self.sink_count, self.region_array, self._ob_id, self._ob_type,
              self._ob_P),

@@ -19,12 +19,17 @@ from conveyor_twin.micro.contacts.tables import (AS_ACTIVE, AS_E, AS_MU, AS_NV, 
                                                  AS_R, AS_VX, AS_VY, AS_W, AS_XMAX, AS_XMIN,
                                                  AS_YMAX, AS_YMIN, CONTACTS_PER_PART, CT_BVX,
                                                  CT_BVY, CT_BW, CT_COLUMNS, CT_DEPTH, CT_E,
+                                                 CT_KA, CT_KB, CT_LN, CT_LP, CT_LT, PV_COLUMNS,
                                                  CT_MU_K, CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY,
                                                  CT_RBX, CT_RBY, CT_V_T, SH_E, SH_MU, SH_NV,
                                                  SH_OFF, SH_R, SH_XMAX, SH_XMIN, SH_YMAX,
                                                  SH_YMIN)
 from conveyor_twin.micro.state import (PT_BRAD, PT_E, PT_HL, PT_HW, PT_MU_K, PT_MU_S, PT_RADIUS,
                                        PT_SHAPE, PT_V_T, SHAPE_DISC)
+
+# Added to the first key of a part's contacts with fixed and kinematic bodies: they follow all
+# part pairs in the canonical order (ids stay below it).
+KEY_FIXED = 2.0 ** 40
 
 
 @njit(cache=True)
@@ -40,7 +45,12 @@ def part_shape(pt, t, x, y, yaw, verts):
 
 @njit(cache=True, inline='always')
 def _record(nc, ct, cidx, a, b, px, py, ax, ay, bx, by, nx, ny, depth, e, mu_s, mu_k, v_t,
-            bvx, bvy, bw):
+            bvx, bvy, bw, ka, kb):
+    ct[nc, CT_KA] = ka
+    ct[nc, CT_KB] = kb
+    ct[nc, CT_LN] = 0.0
+    ct[nc, CT_LT] = 0.0
+    ct[nc, CT_LP] = 0.0
     ct[nc, CT_NX] = nx
     ct[nc, CT_NY] = ny
     ct[nc, CT_RAX] = px - ax
@@ -60,7 +70,7 @@ def _record(nc, ct, cidx, a, b, px, py, ax, ay, bx, by, nx, ny, depth, e, mu_s, 
 
 
 @njit(cache=True)
-def _pair(i, j, ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx):
+def _pair(i, j, ka, kb, ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx):
     """Record the contacts of parts i and j; return the new contact count."""
     ti = ptype[i]
     tj = ptype[j]
@@ -80,13 +90,13 @@ def _pair(i, j, ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx):
         if nc >= ct.shape[0]:
             return nc
         _record(nc, ct, cidx, i, j, out[2 + 3 * c], out[3 + 3 * c], x[i], y[i], x[j], y[j],
-                out[0], out[1], out[4 + 3 * c], e, mu_s, mu_k, v_t, 0.0, 0.0, 0.0)
+                out[0], out[1], out[4 + 3 * c], e, mu_s, mu_k, v_t, 0.0, 0.0, 0.0, ka, kb + c)
         nc += 1
     return nc
 
 
 @njit(cache=True)
-def _fixed(i, ptype, x, y, yaw, pt, va, vb, nb, rb, bvx, bvy, bw, bpx, bpy, e, mu, out,
+def _fixed(i, ka, kb, ptype, x, y, yaw, pt, va, vb, nb, rb, bvx, bvy, bw, bpx, bpy, e, mu, out,
            nc, ct, cidx):
     """Record the contacts of part i with a fixed or kinematic body (core ``vb[:nb]``)."""
     ti = ptype[i]
@@ -101,16 +111,18 @@ def _fixed(i, ptype, x, y, yaw, pt, va, vb, nb, rb, bvx, bvy, bw, bpx, bpy, e, m
             return nc
         _record(nc, ct, cidx, i, -1, out[2 + 3 * c], out[3 + 3 * c], x[i], y[i], bpx, bpy,
                 out[0], out[1], out[4 + 3 * c], e, mu * ratio, mu, pt[ti, PT_V_T], bvx, bvy,
-                bw)
+                bw, ka, kb + c)
         nc += 1
     return nc
 
 
 @njit(cache=True)
-def detect(n, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, shp, shp_verts,
+def detect(n, ids, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, shp, shp_verts,
            act_state, act_verts, va, vb, out, ct, cidx):
     """Record every contact of parts 0..n-1 in the canonical order; return how many.
 
+    :param ids: the parts' ids (ascending): with the shape index or the point they key the
+        records (``CT_KA``, ``CT_KB``), ascending in the canonical order.
     :param nbr, part_cell: the neighbour list and the parts' grid cells as
         :func:`update_pairs` left them (current for these positions).
     :param shp: static shape table (S, SH_COLUMNS); ``shp_verts`` (V, 2) their cores [m].
@@ -124,8 +136,10 @@ def detect(n, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, 
     o_start = NB_HEADER + cap
     o_j = o_start + cap + 1
     nc = 0
+    n_static = shp.shape[0]
     for i in range(n):
         bri = pt[ptype[i], PT_BRAD]
+        ka = float(ids[i])
         xi = x[i]
         yi = y[i]
         ti = ptype[i]
@@ -159,12 +173,15 @@ def detect(n, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, 
                         nx, ny, depth, 0.5 * (pt[ti, PT_E] + pt[tj, PT_E]),
                         0.5 * (pt[ti, PT_MU_S] + pt[tj, PT_MU_S]),
                         0.5 * (pt[ti, PT_MU_K] + pt[tj, PT_MU_K]),
-                        0.5 * (pt[ti, PT_V_T] + pt[tj, PT_V_T]), 0.0, 0.0, 0.0)
+                        0.5 * (pt[ti, PT_V_T] + pt[tj, PT_V_T]), 0.0, 0.0, 0.0, ka,
+                        2.0 * ids[j])
                 nc += 1
             else:
-                nc = _pair(i, j, ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx)
+                nc = _pair(i, j, ka, 2.0 * ids[j], ptype, x, y, yaw, pt, va, vb, out, nc, ct,
+                           cidx)
     for i in range(n):
         bri = pt[ptype[i], PT_BRAD]
+        ka = KEY_FIXED + ids[i]
         c = part_cell[i]
         for k in range(static_start[c], static_start[c + 1]):
             s = static_items[k]
@@ -208,10 +225,11 @@ def detect(n, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, 
                 ratio = pt[ti, PT_MU_S] / pt[ti, PT_MU_K] if pt[ti, PT_MU_K] > 0.0 else 1.0
                 _record(nc, ct, cidx, i, -1, qx + nx * (rb - 0.5 * depth),
                         qy + ny * (rb - 0.5 * depth), x[i], y[i], 0.0, 0.0, nx, ny, depth,
-                        shp[s, SH_E], mu * ratio, mu, pt[ti, PT_V_T], 0.0, 0.0, 0.0)
+                        shp[s, SH_E], mu * ratio, mu, pt[ti, PT_V_T], 0.0, 0.0, 0.0, ka,
+                        2.0 * s)
                 nc += 1
                 continue
-            nc = _fixed(i, ptype, x, y, yaw, pt, va, shp_verts[off:off + nv], nv,
+            nc = _fixed(i, ka, 2.0 * s, ptype, x, y, yaw, pt, va, shp_verts[off:off + nv], nv,
                         shp[s, SH_R], 0.0, 0.0, 0.0, 0.0, 0.0, shp[s, SH_E], shp[s, SH_MU],
                         out, nc, ct, cidx)
         for a in range(act_state.shape[0]):
@@ -221,7 +239,8 @@ def detect(n, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, 
                     or y[i] + bri <= act_state[a, AS_YMIN]
                     or y[i] - bri >= act_state[a, AS_YMAX]):
                 continue
-            nc = _fixed(i, ptype, x, y, yaw, pt, va, act_verts[a], int(act_state[a, AS_NV]),
+            nc = _fixed(i, ka, 2.0 * (n_static + a), ptype, x, y, yaw, pt, va, act_verts[a],
+                        int(act_state[a, AS_NV]),
                         act_state[a, AS_R], act_state[a, AS_VX], act_state[a, AS_VY],
                         act_state[a, AS_W], act_state[a, AS_PX], act_state[a, AS_PY],
                         act_state[a, AS_E], act_state[a, AS_MU], out, nc, ct, cidx)
@@ -229,7 +248,12 @@ def detect(n, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, 
 
 
 def scratch(capacity: int):
-    """Return the scratch arrays of the contact kernels: (cand, va, vb, out, ct, cidx)."""
+    """Return the scratch arrays of the contact kernels: (cand, va, vb, out, ct, cidx, prev).
+
+    ``prev`` (C + 1, PV_COLUMNS) keeps the previous substep's keys and impulses (row C: their
+    count) for the warm start of :func:`conveyor_twin.micro.contacts.response.warm_start`.
+    """
     size = CONTACTS_PER_PART * capacity
     return (np.zeros(capacity + 1, dtype=np.int64), np.zeros((4, 2)), np.zeros((4, 2)),
-            np.zeros(8), np.zeros((size, CT_COLUMNS)), np.zeros((size, 2), dtype=np.int64))
+            np.zeros(8), np.zeros((size, CT_COLUMNS)), np.zeros((size, 2), dtype=np.int64),
+            np.zeros((size + 1, PV_COLUMNS)))

@@ -36,20 +36,21 @@ import math
 
 from numba import njit
 
-from conveyor_twin.micro.contacts.tables import (A_CONTACT_FRICTION, A_DAMPER, A_SPRING, CT_BVX,
-                                                 CT_BVY, CT_BW, CT_CNT, CT_CNT_S, CT_DEPTH,
-                                                 CT_E, CT_FA_S, CT_IKN, CT_IKN_S, CT_IKT,
-                                                 CT_IKT_S, CT_MU_K, CT_MU_S, CT_NEG_1PE, CT_NX,
-                                                 CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY,
-                                                 CT_SLOPE, CT_V_T, CT_WA, CT_WB, MP_CORRECTION,
-                                                 MP_DAMPING, MP_DT, MP_SLOP, MP_STIFFNESS,
-                                                 MP_TRACK)
+from conveyor_twin.micro.contacts.tables import (A_CONTACT_FRICTION, A_DAMPER, A_SPRING, CT_BOUNCE,
+                                                 CT_BVX, CT_KA, CT_KB, CT_LN, CT_LP, CT_LT, CT_BVY, CT_BW, CT_CNT, CT_DEPTH, CT_E,
+                                                 CT_IKN, CT_IKT, CT_MU_K, CT_MU_S, CT_NX, CT_NY,
+                                                 CT_RAX, CT_RAY, CT_RBX, CT_RBY, CT_SLOPE, CT_V_T,
+                                                 CT_WA, CT_WB, MP_CORRECTION, MP_DAMPING, MP_DT,
+                                                 MP_SLOP, MP_STIFFNESS, MP_TRACK, PV_KA, PV_KB,
+                                                 PV_LN, PV_LP, PV_LT)
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
 
 # Below this approach speed [m/s] a contact is treated as plastic (no bounce).
 RESTITUTION_THRESHOLD = 0.02
 
 MODE_IMPULSE = 0
+import os
+WARM_PUSH = float(os.environ.get("WARM_PUSH", "1.0"))
 MODE_PENALTY = 1
 
 
@@ -157,22 +158,19 @@ def _masses(ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny):
 
 
 @njit(cache=True)
-def prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp):
+def prepare_contacts(nc, ct, cidx, ptype, pt, mp):
     """Write the per-contact constants of the impulse and position sweeps (one pass).
 
     Geometry only, so the divisions happen here, where they overlap, and the sweeps only
-    multiply: the inverse normal and tangential effective masses and the change of the
-    tangential speed per unit normal impulse (also with the downstream body fixed, for the
-    shock sweep), the friction slope, ``-(1 + e)``, which body moves in the shock sweeps
-    (``passes >= 2``; ``key``: position along the belt [m]) and the shares of the position
-    correction (inverse-mass proportion times ``mp[MP_CORRECTION]``).
+    multiply: the inverse normal and tangential effective masses, the change of the tangential
+    speed per unit normal impulse, the friction slope and the shares of the position correction
+    (inverse-mass proportion times ``mp[MP_CORRECTION]``).
     """
     frac = mp[MP_CORRECTION]
-    shocking = passes >= 2
     last_vt = last_mu_k = last_mu_s = math.nan     # NaN: differs from everything
     last_ima = last_imb = math.nan
-    last_kn = last_kn_s = math.nan
-    last_ikn = last_ikn_s = 0.0
+    last_kn = math.nan
+    last_ikn = 0.0
     slope = 0.0
     w = 0.0
     for c in range(nc):
@@ -202,23 +200,6 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp):
         ct[c, CT_IKN] = last_ikn
         ct[c, CT_IKT] = 1.0 / kt
         ct[c, CT_CNT] = cnt
-        ct[c, CT_FA_S] = 1.0
-        if shocking and b >= 0:
-            if key[a] > key[b]:
-                ct[c, CT_FA_S] = 0.0
-                kn, kt, cnt = _masses(0.0, 0.0, imb, iib, rax, ray, rbx, rby, nx, ny)
-            else:
-                kn, kt, cnt = _masses(ima, iia, 0.0, 0.0, rax, ray, rbx, rby, nx, ny)
-            if kn != last_kn_s:
-                last_kn_s = kn
-                last_ikn_s = 1.0 / kn
-            ct[c, CT_IKN_S] = last_ikn_s
-            ct[c, CT_IKT_S] = 1.0 / kt
-            ct[c, CT_CNT_S] = cnt
-        else:
-            ct[c, CT_IKN_S] = ct[c, CT_IKN]
-            ct[c, CT_IKT_S] = ct[c, CT_IKT]
-            ct[c, CT_CNT_S] = ct[c, CT_CNT]
         # the same materials and masses as the contact before (the common case): the same
         # quotients, without dividing again
         v_t = ct[c, CT_V_T]
@@ -230,7 +211,6 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp):
             last_mu_s = mu_s
             slope = (mu_k - mu_s) / v_t if v_t > 0.0 else 0.0
         ct[c, CT_SLOPE] = slope
-        ct[c, CT_NEG_1PE] = -(1.0 + ct[c, CT_E])
         if ima != last_ima or imb != last_imb:
             last_ima = ima
             last_imb = imb
@@ -240,45 +220,147 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, passes, key, mp):
 
 
 @njit(cache=True)
-def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc):
-    """Apply the contacts' impulses in ``passes`` sweeps (canonical order).
+def warm_start(n, nc, ct, cidx, ptype, vx, vy, wz, pt, prev, bx, by, bw):
+    """Start the substep's impulses from the previous substep's (warm start), scaled so the
+    kinetic energy does not rise; record each contact's bounce.
 
-    The first sweep is Hoher et al.'s response, with restitution. Further sweeps are plastic and
-    touch only contacts still closing (so they change nothing for isolated impacts). With
-    ``passes >= 2`` the last sweep is a shock-propagation sweep: of two parts the one further
-    downstream (larger ``key``, its position along its belt's direction [m]) counts as fixed,
-    so a pile pressed by the belt against an obstacle is stopped in one sweep.
+    A contact takes the accumulated impulses of the previous substep's contact with the same
+    keys (``CT_KA``, ``CT_KB``; both lists ascend in the canonical order, so one merge finds
+    them), the tangential one clamped to ``mu_s`` times the normal one. The bounce
+    (``CT_BOUNCE``) is ``e`` times the normal approach speed before any impulse of the substep
+    (0 below :data:`RESTITUTION_THRESHOLD`). All impulses are summed per part (``bx``, ``by``:
+    impulse [N s], ``bw``: its moment [N m s], scratch of length n), then applied scaled by the
+    largest ``s <= 1`` that does not raise the kinetic energy: with the parts' velocities ``v``,
+    ``K(s) = K(0) + s g + s^2 q``, ``g = sum v . P``, ``q = sum P^2 / 2m``, so ``s = -g / q``
+    when that is below 1, 0 if ``g >= 0``. In a jam held against the belt the previous
+    impulses hold back what the belt added (``g ~ -2 q``) and apply in full; where they would
+    push bodies apart that no longer press on each other, they shrink.
+
+    :param prev: (C + 1, PV_COLUMNS) the previous contacts' keys and impulses, row C their count.
+    :return: number of contacts that found their predecessor.
+    """
+    nprev = int(prev[prev.shape[0] - 1, 0])
+    q = 0
+    found = 0
+    for i in range(n):
+        bx[i] = 0.0
+        by[i] = 0.0
+        bw[i] = 0.0
+    for c in range(nc):
+        a = cidx[c, 0]
+        b = cidx[c, 1]
+        ka = ct[c, CT_KA]
+        kb = ct[c, CT_KB]
+        while q < nprev and (prev[q, PV_KA] < ka or (prev[q, PV_KA] == ka
+                                                     and prev[q, PV_KB] < kb)):
+            q += 1
+        ln = 0.0
+        lt = 0.0
+        if q < nprev and prev[q, PV_KA] == ka and prev[q, PV_KB] == kb:
+            ln = prev[q, PV_LN]
+            ct[c, CT_LP] = prev[q, PV_LP]
+            limit = ct[c, CT_MU_S] * ln
+            lt = min(max(prev[q, PV_LT], -limit), limit)
+            found += 1
+        nx = ct[c, CT_NX]
+        ny = ct[c, CT_NY]
+        rax = ct[c, CT_RAX]
+        ray = ct[c, CT_RAY]
+        rbx = ct[c, CT_RBX]
+        rby = ct[c, CT_RBY]
+        if b >= 0:
+            vbx = vx[b]
+            vby = vy[b]
+            wb = wz[b]
+        else:
+            vbx = ct[c, CT_BVX]
+            vby = ct[c, CT_BVY]
+            wb = ct[c, CT_BW]
+        un = (((vx[a] - wz[a] * ray) - (vbx - wb * rby)) * nx
+              + ((vy[a] + wz[a] * rax) - (vby + wb * rbx)) * ny)
+        ct[c, CT_BOUNCE] = ct[c, CT_E] * -un if -un > RESTITUTION_THRESHOLD else 0.0
+        ct[c, CT_LN] = ln
+        ct[c, CT_LT] = lt
+        px = ln * nx - lt * ny
+        py = ln * ny + lt * nx
+        bx[a] += px
+        by[a] += py
+        bw[a] += rax * py - ray * px
+        if b >= 0:
+            bx[b] -= px
+            by[b] -= py
+            bw[b] -= rbx * py - rby * px
+    prev[prev.shape[0] - 1, 1] = found
+    prev[prev.shape[0] - 1, 2] = 0.0
+    if found == 0:
+        return 0
+    g = 0.0
+    k2 = 0.0
+    for i in range(n):
+        t = ptype[i]
+        g += vx[i] * bx[i] + vy[i] * by[i] + wz[i] * bw[i]
+        k2 += ((bx[i] * bx[i] + by[i] * by[i]) * pt[t, PT_INV_MASS]
+               + bw[i] * bw[i] * pt[t, PT_INV_INERTIA])
+    q2 = 0.5 * k2
+    s = 0.0
+    if q2 > 0.0 and g < 0.0:
+        s = min(1.0, -g / q2)
+    prev[prev.shape[0] - 1, 2] = s
+    prev[prev.shape[0] - 1, 3] = g / q2 if q2 > 0.0 else 0.0
+    if s == 0.0:
+        for c in range(nc):
+            ct[c, CT_LN] = 0.0
+            ct[c, CT_LT] = 0.0
+        return found
+    if s < 1.0:
+        for c in range(nc):
+            ct[c, CT_LN] *= s
+            ct[c, CT_LT] *= s
+    for i in range(n):
+        t = ptype[i]
+        vx[i] += s * bx[i] * pt[t, PT_INV_MASS]
+        vy[i] += s * by[i] * pt[t, PT_INV_MASS]
+        wz[i] += s * bw[i] * pt[t, PT_INV_INERTIA]
+    return found
+
+
+@njit(cache=True)
+def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
+    """Apply the contacts' impulses in ``passes`` sweeps (canonical order) after
+    :func:`warm_start`; keep the keys and accumulated impulses in ``prev`` for the next substep.
+
+    Sequential impulses with accumulated impulses (Catto): every impulse acts on both bodies of
+    its contact, equal and opposite, at the contact point (the same point for both, so the
+    moments are those of one force), so every sweep keeps total linear and angular momentum to
+    round-off. The normal impulse of a contact accumulated over the substep stays >= 0; each
+    increment brings the relative normal speed ``u_n`` to ``min(b, |u_n|)`` (``b`` its bounce)
+    as far as that allows: a closing contact is stopped or bounced at most back at its approach
+    speed, a separating one slowed toward ``b``, so no increment adds kinetic energy. The
+    tangential increment stops the sliding at most, the accumulated tangential impulse clamped
+    to ``mu(|u_t|)`` times the normal one (Coulomb, Horváth et al.'s speed-dependent
+    coefficient) as far as an increment may go without adding energy (at most reversing the
+    sliding speed). An isolated impact gets :func:`impulse_response`'s result in the first
+    sweep and nothing in the later ones.
 
     The sweeps are Gauss-Seidel: each contact sees the velocities left by the ones before it,
     so the per-contact work is a dependency chain; the records must have been prepared by
-    :func:`prepare_contacts` (the sweeps only multiply). Each impulse is that of
-    :func:`impulse_response`.
+    :func:`prepare_contacts` and :func:`warm_start` (the sweeps only multiply).
     """
     track = mp[MP_TRACK] != 0.0
-    shocking = passes >= 2
     for it in range(passes):
-        shock = shocking and it == passes - 1
-        ikn_col = CT_IKN_S if shock else CT_IKN
-        ikt_col = CT_IKT_S if shock else CT_IKT
-        cnt_col = CT_CNT_S if shock else CT_CNT
-        first = it == 0
+        last = it == passes - 1
         # branch-free per contact (the outcome of closing/separating, sticking/sliding is
-        # data-dependent and would mispredict): a separating contact gets jn = 0, hence jt = 0
+        # data-dependent and would mispredict)
         for c in range(nc):
             a = cidx[c, 0]
             b = cidx[c, 1]
-            fa = 1.0
-            fb = 1.0
-            if shock:
-                fa = ct[c, CT_FA_S]
-                fb = 1.0 - fa
             ta = ptype[a]
-            ima = pt[ta, PT_INV_MASS] * fa
-            iia = pt[ta, PT_INV_INERTIA] * fa
+            ima = pt[ta, PT_INV_MASS]
+            iia = pt[ta, PT_INV_INERTIA]
             if b >= 0:
                 tb = ptype[b]
-                imb = pt[tb, PT_INV_MASS] * fb
-                iib = pt[tb, PT_INV_INERTIA] * fb
+                imb = pt[tb, PT_INV_MASS]
+                iib = pt[tb, PT_INV_INERTIA]
                 vbx = vx[b]
                 vby = vy[b]
                 wb = wz[b]
@@ -303,16 +385,21 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc):
             ux = (vax - wa * ray) - (vbx - wb * rby)
             uy = (vay + wa * rax) - (vby + wb * rbx)
             un = ux * nx + uy * ny
-            # -(1 + e) when bouncing, else -1 (the same numbers as -(1 + 0))
-            f = ct[c, CT_NEG_1PE] if first and -un > RESTITUTION_THRESHOLD else -1.0
-            jn = max(f * un * ct[c, ikn_col], 0.0)
-            ut = (uy * nx - ux * ny) + jn * ct[c, cnt_col]
-            jt = -ut * ct[c, ikt_col]
+            ln = ct[c, CT_LN]
+            ln1 = max(ln + (min(ct[c, CT_BOUNCE], abs(un)) - un) * ct[c, CT_IKN], 0.0)
+            jn = ln1 - ln
+            ut = (uy * nx - ux * ny) + jn * ct[c, CT_CNT]
+            dt = -ut * ct[c, CT_IKT]
             speed = abs(ut)
             mu = (ct[c, CT_MU_S] + ct[c, CT_SLOPE] * speed if speed < ct[c, CT_V_T]
                   else ct[c, CT_MU_K])
-            limit = mu * jn
-            jt = min(max(jt, -limit), limit)
+            limit = mu * ln1
+            lt = ct[c, CT_LT]
+            jt = min(max(lt + dt, -limit), limit) - lt
+            # an increment between 0 and 2 dt does not add energy
+            jt = min(max(jt, min(0.0, 2.0 * dt)), max(0.0, 2.0 * dt))
+            ct[c, CT_LN] = ln1
+            ct[c, CT_LT] = lt + jt
             # total impulse along x, y (t = (-ny, nx)) and its moments
             px = jn * nx - jt * ny
             py = jn * ny + jt * nx
@@ -325,23 +412,50 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, key, mp, acc):
                 wz[b] = wb - iib * (rbx * py - rby * px)
             if track:
                 acc[A_CONTACT_FRICTION] += abs(jt * ut)
+            if last:
+                prev[c, PV_KA] = ct[c, CT_KA]
+                prev[c, PV_KB] = ct[c, CT_KB]
+                prev[c, PV_LN] = ln1
+                prev[c, PV_LT] = lt + jt
+    if passes == 0:
+        for c in range(nc):
+            prev[c, PV_KA] = ct[c, CT_KA]
+            prev[c, PV_KB] = ct[c, CT_KB]
+            prev[c, PV_LN] = ct[c, CT_LN]
+            prev[c, PV_LT] = ct[c, CT_LT]
+    prev[prev.shape[0] - 1, 0] = nc
 
 
 @njit(cache=True)
-def correct_positions(nc, ct, cidx, ptype, x, y, x0, y0, pt, passes, key, mp):
+def correct_positions(nc, ct, cidx, ptype, x, y, x0, y0, pt, passes, mp, prev):
     """Push overlapping bodies apart along the contact normals (translation only).
 
     The depth of each contact is estimated from its detected depth and how far its bodies
-    moved since (``x0``, ``y0``: positions at detection); each sweep removes
-    ``mp[MP_CORRECTION]`` of the excess over the slop, in inverse-mass proportion; the last of
-    ``passes >= 2`` sweeps moves only the upstream part of a pair (see :func:`solve_impulses`).
-    The shares come from :func:`prepare_contacts` (no division in the chain).
+    moved since (``x0``, ``y0``: positions at detection). Each contact's push is accumulated
+    over the substep and stays >= 0, like an impulse: the push of the previous substep's
+    contact (found by :func:`warm_start`) is applied first, then each of ``passes`` sweeps
+    changes the push toward removing ``mp[MP_CORRECTION]`` of the excess over the slop (back
+    where a push left the bodies apart by more than the slop). Pushes move both bodies in
+    inverse-mass proportion (a fixed or kinematic body does not move), so the centre of mass
+    stays; velocities are not touched: the correction neither changes momentum nor adds
+    kinetic energy. The shares come from :func:`prepare_contacts` (no division in the chain).
     """
     slop = mp[MP_SLOP]
-    frac = mp[MP_CORRECTION]
-    shocking = passes >= 2
+    for c in range(nc):
+        d = ct[c, CT_LP] * WARM_PUSH
+        ct[c, CT_LP] = d
+        if d != 0.0:
+            a = cidx[c, 0]
+            b = cidx[c, 1]
+            nx = ct[c, CT_NX]
+            ny = ct[c, CT_NY]
+            x[a] += nx * d * ct[c, CT_WA]
+            y[a] += ny * d * ct[c, CT_WA]
+            if b >= 0:
+                x[b] -= nx * d * ct[c, CT_WB]
+                y[b] -= ny * d * ct[c, CT_WB]
     for it in range(passes):
-        shock = shocking and it == passes - 1
+        last = it == passes - 1
         # branch-free per contact, as in solve_impulses (no excess: a zero move)
         for c in range(nc):
             a = cidx[c, 0]
@@ -349,20 +463,22 @@ def correct_positions(nc, ct, cidx, ptype, x, y, x0, y0, pt, passes, key, mp):
             nx = ct[c, CT_NX]
             ny = ct[c, CT_NY]
             moved = nx * (x[a] - x0[a]) + ny * (y[a] - y0[a])
-            if shock:
-                wa = frac * ct[c, CT_FA_S]
-                wb = frac - wa
-            else:
-                wa = ct[c, CT_WA]
-                wb = ct[c, CT_WB]
+            wa = ct[c, CT_WA]
+            wb = ct[c, CT_WB]
             if b >= 0:
                 moved -= nx * (x[b] - x0[b]) + ny * (y[b] - y0[b])
-            excess = max(ct[c, CT_DEPTH] - moved - slop, 0.0)
-            x[a] += nx * excess * wa
-            y[a] += ny * excess * wa
+            # push (fraction included, as the shares) accumulated over the substep
+            lp = ct[c, CT_LP]
+            lp1 = max(lp + ct[c, CT_DEPTH] - moved - slop, 0.0)
+            d = lp1 - lp
+            ct[c, CT_LP] = lp1
+            x[a] += nx * d * wa
+            y[a] += ny * d * wa
             if b >= 0:
-                x[b] -= nx * excess * wb
-                y[b] -= ny * excess * wb
+                x[b] -= nx * d * wb
+                y[b] -= ny * d * wb
+            if last:
+                prev[c, PV_LP] = lp1
 
 
 @njit(cache=True)

@@ -75,16 +75,26 @@ CT_BW = 13
 # written by :func:`prepare_contacts` before the sweeps (off the sweeps' dependency chain)
 CT_IKN = 14           # 1 / normal effective mass [1/kg]
 CT_IKT = 15           # 1 / tangential effective mass [1/kg]
-CT_IKN_S = 16         # the same in the shock sweep (the downstream body fixed)
-CT_IKT_S = 17
-CT_SLOPE = 18         # (mu_k - mu_s) / v_t [s/m]
-CT_WA = 19            # position correction: share of a (fraction included) [-]
-CT_WB = 20
-CT_CNT = 21           # change of the tangential speed per unit normal impulse [1/kg]
-CT_CNT_S = 22         # the same in the shock sweep
-CT_FA_S = 23          # shock sweep: 1.0 if a moves (b counts as fixed), 0.0 if b moves
-CT_NEG_1PE = 24       # -(1 + e): the normal impulse factor of a bouncing contact
-CT_COLUMNS = 25
+CT_SLOPE = 16         # (mu_k - mu_s) / v_t [s/m]
+CT_WA = 17            # position correction: share of a (fraction included) [-]
+CT_WB = 18
+CT_CNT = 19           # change of the tangential speed per unit normal impulse [1/kg]
+CT_KA = 20            # key: id of a (+ 2^40 against a fixed or kinematic body) [-]
+CT_KB = 21            # key: 2 (id of b, or the shape's index) + the contact point's index [-]
+# written by :func:`warm_start` and the impulse sweeps
+CT_BOUNCE = 22        # normal separation speed restitution asks for [m/s]
+CT_LN = 23            # accumulated normal impulse of the substep [N s]
+CT_LT = 24            # accumulated tangential impulse [N s]
+CT_LP = 25            # accumulated push of the penetration correction [m]
+CT_COLUMNS = 26
+
+# --- the previous substep's contacts (``prev`` (C + 1, PV_COLUMNS); row C, column 0: count) ---
+PV_KA = 0
+PV_KB = 1
+PV_LN = 2
+PV_LT = 3
+PV_LP = 4
+PV_COLUMNS = 5
 
 # contact records per part slot
 CONTACTS_PER_PART = 8
