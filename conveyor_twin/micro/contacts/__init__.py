@@ -16,7 +16,8 @@ from conveyor_twin.micro.contacts.broad_phase import (  # noqa: F401
     neighbour_arrays, update_pairs)
 from conveyor_twin.micro.contacts.narrow_phase import detect, part_shape, scratch  # noqa: F401
 from conveyor_twin.micro.contacts.response import (  # noqa: F401
-    correct_positions, friction_coefficient, impulse_response, MODE_IMPULSE, MODE_PENALTY,
+    correct_positions, friction_coefficient, impulse_response, limit_energy, MODE_IMPULSE,
+    MODE_PENALTY,
     penalty_force, penalty_forces, prepare_contacts, RESTITUTION_THRESHOLD, solve_impulses,
     warm_start)
 from conveyor_twin.micro.contacts.tables import *  # noqa: F401,F403

@@ -19,7 +19,7 @@ from conveyor_twin.micro.contacts.tables import (AS_ACTIVE, AS_E, AS_MU, AS_NV, 
                                                  AS_R, AS_VX, AS_VY, AS_W, AS_XMAX, AS_XMIN,
                                                  AS_YMAX, AS_YMIN, CONTACTS_PER_PART, CT_BVX,
                                                  CT_BVY, CT_BW, CT_COLUMNS, CT_DEPTH, CT_E,
-                                                 CT_KA, CT_KB, CT_LN, CT_LP, CT_LT, PV_COLUMNS,
+                                                 CT_KA, CT_KB, CT_LN, CT_LT, PV_COLUMNS,
                                                  CT_MU_K, CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY,
                                                  CT_RBX, CT_RBY, CT_V_T, SH_E, SH_MU, SH_NV,
                                                  SH_OFF, SH_R, SH_XMAX, SH_XMIN, SH_YMAX,
@@ -50,7 +50,6 @@ def _record(nc, ct, cidx, a, b, px, py, ax, ay, bx, by, nx, ny, depth, e, mu_s, 
     ct[nc, CT_KB] = kb
     ct[nc, CT_LN] = 0.0
     ct[nc, CT_LT] = 0.0
-    ct[nc, CT_LP] = 0.0
     ct[nc, CT_NX] = nx
     ct[nc, CT_NY] = ny
     ct[nc, CT_RAX] = px - ax

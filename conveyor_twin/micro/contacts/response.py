@@ -37,20 +37,18 @@ import math
 from numba import njit
 
 from conveyor_twin.micro.contacts.tables import (A_CONTACT_FRICTION, A_DAMPER, A_SPRING, CT_BOUNCE,
-                                                 CT_BVX, CT_KA, CT_KB, CT_LN, CT_LP, CT_LT, CT_BVY, CT_BW, CT_CNT, CT_DEPTH, CT_E,
+                                                 CT_BVX, CT_KA, CT_KB, CT_LN, CT_LT, CT_BVY, CT_BW, CT_CNT, CT_DEPTH, CT_E,
                                                  CT_IKN, CT_IKT, CT_MU_K, CT_MU_S, CT_NX, CT_NY,
                                                  CT_RAX, CT_RAY, CT_RBX, CT_RBY, CT_SLOPE, CT_V_T,
                                                  CT_WA, CT_WB, MP_CORRECTION, MP_DAMPING, MP_DT,
                                                  MP_SLOP, MP_STIFFNESS, MP_TRACK, PV_KA, PV_KB,
-                                                 PV_LN, PV_LP, PV_LT)
+                                                 PV_LN, PV_LT)
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
 
 # Below this approach speed [m/s] a contact is treated as plastic (no bounce).
 RESTITUTION_THRESHOLD = 0.02
 
 MODE_IMPULSE = 0
-import os
-WARM_PUSH = float(os.environ.get("WARM_PUSH", "1.0"))
 MODE_PENALTY = 1
 
 
@@ -158,7 +156,7 @@ def _masses(ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny):
 
 
 @njit(cache=True)
-def prepare_contacts(nc, ct, cidx, ptype, pt, mp):
+def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz):
     """Write the per-contact constants of the impulse and position sweeps (one pass).
 
     Geometry only, so the divisions happen here, where they overlap, and the sweeps only
@@ -217,57 +215,7 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, mp):
             w = frac / (ima + imb)
         ct[c, CT_WA] = w * ima
         ct[c, CT_WB] = w * imb
-
-
-@njit(cache=True)
-def warm_start(n, nc, ct, cidx, ptype, vx, vy, wz, pt, prev, bx, by, bw):
-    """Start the substep's impulses from the previous substep's (warm start), scaled so the
-    kinetic energy does not rise; record each contact's bounce.
-
-    A contact takes the accumulated impulses of the previous substep's contact with the same
-    keys (``CT_KA``, ``CT_KB``; both lists ascend in the canonical order, so one merge finds
-    them), the tangential one clamped to ``mu_s`` times the normal one. The bounce
-    (``CT_BOUNCE``) is ``e`` times the normal approach speed before any impulse of the substep
-    (0 below :data:`RESTITUTION_THRESHOLD`). All impulses are summed per part (``bx``, ``by``:
-    impulse [N s], ``bw``: its moment [N m s], scratch of length n), then applied scaled by the
-    largest ``s <= 1`` that does not raise the kinetic energy: with the parts' velocities ``v``,
-    ``K(s) = K(0) + s g + s^2 q``, ``g = sum v . P``, ``q = sum P^2 / 2m``, so ``s = -g / q``
-    when that is below 1, 0 if ``g >= 0``. In a jam held against the belt the previous
-    impulses hold back what the belt added (``g ~ -2 q``) and apply in full; where they would
-    push bodies apart that no longer press on each other, they shrink.
-
-    :param prev: (C + 1, PV_COLUMNS) the previous contacts' keys and impulses, row C their count.
-    :return: number of contacts that found their predecessor.
-    """
-    nprev = int(prev[prev.shape[0] - 1, 0])
-    q = 0
-    found = 0
-    for i in range(n):
-        bx[i] = 0.0
-        by[i] = 0.0
-        bw[i] = 0.0
-    for c in range(nc):
-        a = cidx[c, 0]
-        b = cidx[c, 1]
-        ka = ct[c, CT_KA]
-        kb = ct[c, CT_KB]
-        while q < nprev and (prev[q, PV_KA] < ka or (prev[q, PV_KA] == ka
-                                                     and prev[q, PV_KB] < kb)):
-            q += 1
-        ln = 0.0
-        lt = 0.0
-        if q < nprev and prev[q, PV_KA] == ka and prev[q, PV_KB] == kb:
-            ln = prev[q, PV_LN]
-            ct[c, CT_LP] = prev[q, PV_LP]
-            limit = ct[c, CT_MU_S] * ln
-            lt = min(max(prev[q, PV_LT], -limit), limit)
-            found += 1
-        nx = ct[c, CT_NX]
-        ny = ct[c, CT_NY]
-        rax = ct[c, CT_RAX]
-        ray = ct[c, CT_RAY]
-        rbx = ct[c, CT_RBX]
-        rby = ct[c, CT_RBY]
+        # restitution from the approach before any impulse of the substep
         if b >= 0:
             vbx = vx[b]
             vby = vy[b]
@@ -279,48 +227,61 @@ def warm_start(n, nc, ct, cidx, ptype, vx, vy, wz, pt, prev, bx, by, bw):
         un = (((vx[a] - wz[a] * ray) - (vbx - wb * rby)) * nx
               + ((vy[a] + wz[a] * rax) - (vby + wb * rbx)) * ny)
         ct[c, CT_BOUNCE] = ct[c, CT_E] * -un if -un > RESTITUTION_THRESHOLD else 0.0
-        ct[c, CT_LN] = ln
-        ct[c, CT_LT] = lt
-        px = ln * nx - lt * ny
-        py = ln * ny + lt * nx
-        bx[a] += px
-        by[a] += py
-        bw[a] += rax * py - ray * px
-        if b >= 0:
-            bx[b] -= px
-            by[b] -= py
-            bw[b] -= rbx * py - rby * px
-    prev[prev.shape[0] - 1, 1] = found
-    prev[prev.shape[0] - 1, 2] = 0.0
-    if found == 0:
-        return 0
-    g = 0.0
-    k2 = 0.0
-    for i in range(n):
-        t = ptype[i]
-        g += vx[i] * bx[i] + vy[i] * by[i] + wz[i] * bw[i]
-        k2 += ((bx[i] * bx[i] + by[i] * by[i]) * pt[t, PT_INV_MASS]
-               + bw[i] * bw[i] * pt[t, PT_INV_INERTIA])
-    q2 = 0.5 * k2
-    s = 0.0
-    if q2 > 0.0 and g < 0.0:
-        s = min(1.0, -g / q2)
-    prev[prev.shape[0] - 1, 2] = s
-    prev[prev.shape[0] - 1, 3] = g / q2 if q2 > 0.0 else 0.0
-    if s == 0.0:
-        for c in range(nc):
-            ct[c, CT_LN] = 0.0
-            ct[c, CT_LT] = 0.0
-        return found
-    if s < 1.0:
-        for c in range(nc):
-            ct[c, CT_LN] *= s
-            ct[c, CT_LT] *= s
-    for i in range(n):
-        t = ptype[i]
-        vx[i] += s * bx[i] * pt[t, PT_INV_MASS]
-        vy[i] += s * by[i] * pt[t, PT_INV_MASS]
-        wz[i] += s * bw[i] * pt[t, PT_INV_INERTIA]
+
+
+@njit(cache=True)
+def warm_start(nc, ct, cidx, ptype, vx, vy, wz, pt, prev):
+    """Start the substep's impulses from the previous substep's (warm start, Catto) and record
+    each contact's bounce; return how many contacts found their predecessor.
+
+    A contact takes the accumulated impulses of the previous substep's contact with the same
+    keys (``CT_KA``, ``CT_KB``; both lists ascend in the canonical order, so one merge finds
+    them), the tangential one clamped to ``mu_s`` times the normal one, and applies them to
+    both bodies (equal and opposite, at the contact point). The bounce (``CT_BOUNCE``) is ``e``
+    times the normal approach speed before any impulse of the substep (0 below
+    :data:`RESTITUTION_THRESHOLD`). In a jam the previous impulses are what holds back the
+    belt's push, so the sweeps start from them instead of building a force chain through
+    hundreds of parts anew every substep.
+
+    :param prev: (C + 1, PV_COLUMNS) the previous contacts' keys and impulses, row C their count.
+    """
+    nprev = int(prev[prev.shape[0] - 1, 0])
+    q = 0
+    found = 0
+    for c in range(nc):
+        ka = ct[c, CT_KA]
+        kb = ct[c, CT_KB]
+        while q < nprev and (prev[q, PV_KA] < ka or (prev[q, PV_KA] == ka
+                                                     and prev[q, PV_KB] < kb)):
+            q += 1
+        if q < nprev and prev[q, PV_KA] == ka and prev[q, PV_KB] == kb:
+            ln = prev[q, PV_LN]
+            limit = ct[c, CT_MU_S] * ln
+            lt = min(max(prev[q, PV_LT], -limit), limit)
+            found += 1
+            a = cidx[c, 0]
+            b = cidx[c, 1]
+            nx = ct[c, CT_NX]
+            ny = ct[c, CT_NY]
+            rax = ct[c, CT_RAX]
+            ray = ct[c, CT_RAY]
+            rbx = ct[c, CT_RBX]
+            rby = ct[c, CT_RBY]
+            ct[c, CT_LN] = ln
+            ct[c, CT_LT] = lt
+            px = ln * nx - lt * ny
+            py = ln * ny + lt * nx
+            ta = ptype[a]
+            ima = pt[ta, PT_INV_MASS]
+            vx[a] += px * ima
+            vy[a] += py * ima
+            wz[a] += pt[ta, PT_INV_INERTIA] * (rax * py - ray * px)
+            if b >= 0:
+                tb = ptype[b]
+                imb = pt[tb, PT_INV_MASS]
+                vx[b] -= px * imb
+                vy[b] -= py * imb
+                wz[b] -= pt[tb, PT_INV_INERTIA] * (rbx * py - rby * px)
     return found
 
 
@@ -336,11 +297,10 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
     increment brings the relative normal speed ``u_n`` to ``min(b, |u_n|)`` (``b`` its bounce)
     as far as that allows: a closing contact is stopped or bounced at most back at its approach
     speed, a separating one slowed toward ``b``, so no increment adds kinetic energy. The
-    tangential increment stops the sliding at most, the accumulated tangential impulse clamped
-    to ``mu(|u_t|)`` times the normal one (Coulomb, Horváth et al.'s speed-dependent
-    coefficient) as far as an increment may go without adding energy (at most reversing the
-    sliding speed). An isolated impact gets :func:`impulse_response`'s result in the first
-    sweep and nothing in the later ones.
+    tangential increment stops the sliding, the accumulated tangential impulse clamped to
+    ``mu(|u_t|)`` times the normal one (Coulomb, Horváth et al.'s speed-dependent coefficient).
+    An isolated impact gets :func:`impulse_response`'s result in the first sweep and nothing
+    in the later ones.
 
     The sweeps are Gauss-Seidel: each contact sees the velocities left by the ones before it,
     so the per-contact work is a dependency chain; the records must have been prepared by
@@ -389,17 +349,20 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
             ln1 = max(ln + (min(ct[c, CT_BOUNCE], abs(un)) - un) * ct[c, CT_IKN], 0.0)
             jn = ln1 - ln
             ut = (uy * nx - ux * ny) + jn * ct[c, CT_CNT]
-            dt = -ut * ct[c, CT_IKT]
             speed = abs(ut)
             mu = (ct[c, CT_MU_S] + ct[c, CT_SLOPE] * speed if speed < ct[c, CT_V_T]
                   else ct[c, CT_MU_K])
             limit = mu * ln1
             lt = ct[c, CT_LT]
+            dt = -ut * ct[c, CT_IKT]
             jt = min(max(lt + dt, -limit), limit) - lt
             # an increment between 0 and 2 dt does not add energy
+            # as far as an increment may go without adding energy: between 0 and 2 dt (where
+            # the cone shrank, the accumulated impulse stays outside until an increment may)
             jt = min(max(jt, min(0.0, 2.0 * dt)), max(0.0, 2.0 * dt))
+            lt1 = lt + jt
             ct[c, CT_LN] = ln1
-            ct[c, CT_LT] = lt + jt
+            ct[c, CT_LT] = lt1
             # total impulse along x, y (t = (-ny, nx)) and its moments
             px = jn * nx - jt * ny
             py = jn * ny + jt * nx
@@ -416,46 +379,66 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
                 prev[c, PV_KA] = ct[c, CT_KA]
                 prev[c, PV_KB] = ct[c, CT_KB]
                 prev[c, PV_LN] = ln1
-                prev[c, PV_LT] = lt + jt
-    if passes == 0:
-        for c in range(nc):
-            prev[c, PV_KA] = ct[c, CT_KA]
-            prev[c, PV_KB] = ct[c, CT_KB]
-            prev[c, PV_LN] = ct[c, CT_LN]
-            prev[c, PV_LT] = ct[c, CT_LT]
+                prev[c, PV_LT] = lt1
     prev[prev.shape[0] - 1, 0] = nc
 
 
 @njit(cache=True)
-def correct_positions(nc, ct, cidx, ptype, x, y, x0, y0, pt, passes, mp, prev):
+def limit_energy(n, nc, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev):
+    """Scale the substep's contact impulses so they do not raise the parts' kinetic energy.
+
+    ``v0x``, ``v0y``, ``w0``: the velocities before :func:`warm_start`. All the substep's
+    impulses together changed them by ``dv``; scaled by ``s`` the kinetic energy changes by
+    ``s g + s^2 q`` (``g = sum m v0 . dv + I w0 dw``, ``q = sum (m dv^2 + I dw^2) / 2``). If
+    that is positive at ``s = 1`` (a warm start pushed apart bodies that no longer press on
+    each other, or friction let go of what it held) the largest ``s`` that keeps the energy is
+    taken, ``-g / q`` (0 if ``g >= 0``), and the impulses kept for the next warm start are
+    scaled alike. Every impulse keeps its partner, so momentum stays; in a jam held against the
+    belt the impulses take back what the belt added (``g ~ -2 q``), and nothing changes.
+    :return: ``s`` (1: unchanged).
+    """
+    g = 0.0
+    q = 0.0
+    qa = 0.0
+    for i in range(n):
+        t = ptype[i]
+        dx = vx[i] - v0x[i]
+        dy = vy[i] - v0y[i]
+        dw = wz[i] - w0[i]
+        mi = 1.0 / pt[t, PT_INV_MASS]
+        ii = 1.0 / pt[t, PT_INV_INERTIA]
+        g += mi * (v0x[i] * dx + v0y[i] * dy) + ii * w0[i] * dw
+        q += 0.5 * (mi * (dx * dx + dy * dy) + ii * dw * dw)
+        qa += 0.5 * ii * dw * dw
+    prev[prev.shape[0] - 1, 2] = g + q
+    prev[prev.shape[0] - 1, 3] = qa / q if q > 0.0 else 0.0
+    if g + q <= 0.0:
+        return 1.0
+    s = -g / q if g < 0.0 else 0.0
+    prev[prev.shape[0] - 1, 1] += 1
+    for i in range(n):
+        vx[i] = v0x[i] + s * (vx[i] - v0x[i])
+        vy[i] = v0y[i] + s * (vy[i] - v0y[i])
+        wz[i] = w0[i] + s * (wz[i] - w0[i])
+    for c in range(nc):
+        prev[c, PV_LN] *= s
+        prev[c, PV_LT] *= s
+    return s
+
+
+@njit(cache=True)
+def correct_positions(nc, ct, cidx, ptype, x, y, x0, y0, pt, passes, mp):
     """Push overlapping bodies apart along the contact normals (translation only).
 
     The depth of each contact is estimated from its detected depth and how far its bodies
-    moved since (``x0``, ``y0``: positions at detection). Each contact's push is accumulated
-    over the substep and stays >= 0, like an impulse: the push of the previous substep's
-    contact (found by :func:`warm_start`) is applied first, then each of ``passes`` sweeps
-    changes the push toward removing ``mp[MP_CORRECTION]`` of the excess over the slop (back
-    where a push left the bodies apart by more than the slop). Pushes move both bodies in
-    inverse-mass proportion (a fixed or kinematic body does not move), so the centre of mass
-    stays; velocities are not touched: the correction neither changes momentum nor adds
-    kinetic energy. The shares come from :func:`prepare_contacts` (no division in the chain).
+    moved since (``x0``, ``y0``: positions at detection); each of ``passes`` sweeps removes
+    ``mp[MP_CORRECTION]`` of the excess over the slop, in inverse-mass proportion (a fixed or
+    kinematic body does not move), so the centre of mass stays. Velocities are not touched: the
+    correction neither changes momentum nor adds kinetic energy. The shares come from
+    :func:`prepare_contacts` (no division in the chain).
     """
     slop = mp[MP_SLOP]
-    for c in range(nc):
-        d = ct[c, CT_LP] * WARM_PUSH
-        ct[c, CT_LP] = d
-        if d != 0.0:
-            a = cidx[c, 0]
-            b = cidx[c, 1]
-            nx = ct[c, CT_NX]
-            ny = ct[c, CT_NY]
-            x[a] += nx * d * ct[c, CT_WA]
-            y[a] += ny * d * ct[c, CT_WA]
-            if b >= 0:
-                x[b] -= nx * d * ct[c, CT_WB]
-                y[b] -= ny * d * ct[c, CT_WB]
     for it in range(passes):
-        last = it == passes - 1
         # branch-free per contact, as in solve_impulses (no excess: a zero move)
         for c in range(nc):
             a = cidx[c, 0]
@@ -467,18 +450,12 @@ def correct_positions(nc, ct, cidx, ptype, x, y, x0, y0, pt, passes, mp, prev):
             wb = ct[c, CT_WB]
             if b >= 0:
                 moved -= nx * (x[b] - x0[b]) + ny * (y[b] - y0[b])
-            # push (fraction included, as the shares) accumulated over the substep
-            lp = ct[c, CT_LP]
-            lp1 = max(lp + ct[c, CT_DEPTH] - moved - slop, 0.0)
-            d = lp1 - lp
-            ct[c, CT_LP] = lp1
-            x[a] += nx * d * wa
-            y[a] += ny * d * wa
+            excess = max(ct[c, CT_DEPTH] - moved - slop, 0.0)
+            x[a] += nx * excess * wa
+            y[a] += ny * excess * wa
             if b >= 0:
-                x[b] -= nx * d * wb
-                y[b] -= ny * d * wb
-            if last:
-                prev[c, PV_LP] = lp1
+                x[b] -= nx * excess * wb
+                y[b] -= ny * excess * wb
 
 
 @njit(cache=True)

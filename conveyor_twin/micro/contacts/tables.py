@@ -85,16 +85,14 @@ CT_KB = 21            # key: 2 (id of b, or the shape's index) + the contact poi
 CT_BOUNCE = 22        # normal separation speed restitution asks for [m/s]
 CT_LN = 23            # accumulated normal impulse of the substep [N s]
 CT_LT = 24            # accumulated tangential impulse [N s]
-CT_LP = 25            # accumulated push of the penetration correction [m]
-CT_COLUMNS = 26
+CT_COLUMNS = 25
 
 # --- the previous substep's contacts (``prev`` (C + 1, PV_COLUMNS); row C, column 0: count) ---
 PV_KA = 0
 PV_KB = 1
 PV_LN = 2
 PV_LT = 3
-PV_LP = 4
-PV_COLUMNS = 5
+PV_COLUMNS = 4
 
 # contact records per part slot
 CONTACTS_PER_PART = 8
