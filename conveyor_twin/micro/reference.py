@@ -160,32 +160,84 @@ def impulse_ref(va, wa, ma_inv, ia_inv, ra, vb, wb, mb_inv, ib_inv, rb, n, e, mu
 
 
 def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np.ndarray,
-               i_inv: np.ndarray, key: np.ndarray, passes: int) -> None:
-    """Apply the impulse sweeps of :func:`conveyor_twin.micro.contacts.response.solve_impulses`.
+               i_inv: np.ndarray, passes: int) -> List[Tuple[float, float]]:
+    """Apply the impulses of :func:`conveyor_twin.micro.contacts.response.warm_start`,
+    :func:`~conveyor_twin.micro.contacts.response.solve_impulses` and
+    :func:`~conveyor_twin.micro.contacts.response.limit_energy`; return the accumulated
+    (normal, tangential) impulse of each contact.
 
     :param contacts: dicts with ``a``, ``b`` (-1: fixed), ``n``, ``ra``, ``rb``, ``e``,
-        ``mu_s``, ``mu_k``, ``v_t``, ``bv``, ``bw``. :param v: (n, 2) velocities, in place.
+        ``mu_s``, ``mu_k``, ``v_t``, ``bv``, ``bw`` and the warm start ``ln``, ``lt`` (the
+        previous substep's impulses, 0 for a new contact). :param v: (n, 2) velocities, in place.
     """
-    for sweep in range(passes):
-        shock = passes >= 2 and sweep == passes - 1
-        for c in contacts:
-            a, b = c['a'], c['b']
-            e = c['e'] if sweep == 0 else 0.0
-            ma, ia = m_inv[a], i_inv[a]
-            if b >= 0:
-                mb, ib = m_inv[b], i_inv[b]
-                if shock:
-                    if key[a] > key[b]:
-                        ma, ia = 0.0, 0.0
-                    else:
-                        mb, ib = 0.0, 0.0
-                v[a], w[a], v[b], w[b] = impulse_ref(v[a], w[a], ma, ia, c['ra'], v[b], w[b],
-                                                     mb, ib, c['rb'], c['n'], e, c['mu_s'],
-                                                     c['mu_k'], c['v_t'])
-            else:
-                v[a], w[a], _, _ = impulse_ref(v[a], w[a], ma, ia, c['ra'], c['bv'], c['bw'],
-                                               0.0, 0.0, c['rb'], c['n'], e, c['mu_s'],
-                                               c['mu_k'], c['v_t'])
+    v0, w0 = v.copy(), w.copy()
+
+    def body(c, side):
+        k = c[side]
+        if k < 0:
+            return np.array(c['bv'], dtype=float), float(c['bw']), 0.0, 0.0
+        return v[k], w[k], m_inv[k], i_inv[k]
+
+    def relative(c):
+        va, wa, _, _ = body(c, 'a')
+        vb, wb, _, _ = body(c, 'b')
+        ra, rb = c['ra'], c['rb']
+        return (va + wa * np.array([-ra[1], ra[0]])) - (vb + wb * np.array([-rb[1], rb[0]]))
+
+    def apply(c, impulse):
+        a, b = c['a'], c['b']
+        v[a] += impulse * m_inv[a]
+        w[a] += i_inv[a] * cross(c['ra'], impulse)
+        if b >= 0:
+            v[b] -= impulse * m_inv[b]
+            w[b] -= i_inv[b] * cross(c['rb'], impulse)
+
+    def inverse_mass(c, d):
+        k = m_inv[c['a']] + i_inv[c['a']] * cross(c['ra'], d) ** 2
+        if c['b'] >= 0:
+            k += m_inv[c['b']] + i_inv[c['b']] * cross(c['rb'], d) ** 2
+        return k
+
+    # bounce from the approach before any impulse
+    bounce = []
+    for c in contacts:
+        un = relative(c) @ c['n']
+        bounce.append(c['e'] * -un if -un > 0.02 else 0.0)
+    # warm start
+    acc = []
+    for c in contacts:
+        n = np.asarray(c['n'], dtype=float)
+        t = np.array([-n[1], n[0]])
+        ln = c['ln']
+        lt = min(max(c['lt'], -c['mu_s'] * ln), c['mu_s'] * ln)
+        apply(c, ln * n + lt * t)
+        acc.append([ln, lt])
+    for _ in range(passes):
+        for k, c in enumerate(contacts):
+            n = np.asarray(c['n'], dtype=float)
+            t = np.array([-n[1], n[0]])
+            un = relative(c) @ n
+            ln, lt = acc[k]
+            ln1 = max(ln + (min(bounce[k], abs(un)) - un) / inverse_mass(c, n), 0.0)
+            apply(c, (ln1 - ln) * n)
+            ut = relative(c) @ t
+            dt = -ut / inverse_mass(c, t)
+            limit = friction_ref(c['mu_s'], c['mu_k'], c['v_t'], abs(ut)) * ln1
+            jt = min(max(lt + dt, -limit), limit) - lt
+            jt = min(max(jt, min(0.0, 2 * dt)), max(0.0, 2 * dt))
+            apply(c, jt * t)
+            acc[k] = [ln1, lt + jt]
+    # no rise of the kinetic energy
+    m, inertia = 1.0 / m_inv, 1.0 / i_inv
+    dv, dw = v - v0, w - w0
+    g = float(np.sum(m[:, None] * v0 * dv) + np.sum(inertia * w0 * dw))
+    q = 0.5 * float(np.sum(m[:, None] * dv * dv) + np.sum(inertia * dw * dw))
+    if g + q > 0.0:
+        s = -g / q if g < 0.0 else 0.0
+        v[:] = v0 + s * dv
+        w[:] = w0 + s * dw
+        acc = [[s * ln, s * lt] for ln, lt in acc]
+    return [(ln, lt) for ln, lt in acc]
 
 
 def box_core(x: float, y: float, yaw: float, length: float, width: float) -> np.ndarray:

@@ -7,10 +7,11 @@ import pytest
 
 from conveyor_twin.micro import MicroSim
 from conveyor_twin.micro.collide import box_vertices, collide
-from conveyor_twin.micro.contacts import (CT_BVX, CT_BVY, CT_BW, CT_E, CT_MU_K, CT_MU_S,
-                                          CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY, CT_V_T,
-                                          detect, prepare_contacts, solve_impulses,
-                                          update_pairs)
+from conveyor_twin.micro.contacts import (CT_BVX, CT_BVY, CT_BW, CT_E, CT_KA, CT_KB, CT_LN,
+                                          CT_LT, CT_MU_K, CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY,
+                                          CT_RBX, CT_RBY, CT_V_T, detect, limit_energy,
+                                          prepare_contacts, PV_KA, PV_KB, PV_LN, PV_LT,
+                                          solve_impulses, update_pairs, warm_start)
 from conveyor_twin.micro.kernel import CF_SKIN
 from conveyor_twin.micro.reference import box_core, collide_ref, sweeps_ref
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
@@ -79,23 +80,40 @@ def test_impulse_sweeps_match_reference():
     update_pairs(n, s.ids, s.part_type, x, y, sim.pt, sim.grid.gpar, sim.grid.gdim,
                  sim._cell_table, sim._cell_items, sim._part_cell, sim._cand, sim._nbr,
                  sim._pos0, sim.cfg[CF_SKIN])
-    nc = detect(n, s.part_type, x, y, yaw, sim.pt, sim._nbr, sim._part_cell,
+    nc = detect(n, s.ids, s.part_type, x, y, yaw, sim.pt, sim._nbr, sim._part_cell,
                 sim.grid.static_start, sim.grid.static_items, sim.shapes, sim.shape_verts,
                 sim.act_state, sim.act_verts, sim._va, sim._vb, sim._out, sim._ct, sim._cidx)
     assert nc >= 5
-    ct, cidx = sim._ct, sim._cidx
+    ct, cidx, prev = sim._ct, sim._cidx, sim._prev
+    # a previous substep that had every other contact (and one more that is gone)
+    warm = {}
+    rows = []
+    for c in range(0, nc, 2):
+        ln, lt = rng.uniform(0.0, 1e-4), rng.normal(scale=3e-5)
+        warm[c] = (ln, lt)
+        rows.append((ct[c, CT_KA], ct[c, CT_KB], ln, lt))
+    rows.insert(1, (rows[0][0], rows[0][1] + 0.5, 1.0, 1.0))
+    prev[-1, 0] = len(rows)
+    for k, (ka, kb, ln, lt) in enumerate(rows):
+        prev[k, [PV_KA, PV_KB, PV_LN, PV_LT]] = ka, kb, ln, lt
     contacts = [dict(a=int(cidx[c, 0]), b=int(cidx[c, 1]), n=ct[c, [CT_NX, CT_NY]],
                      ra=ct[c, [CT_RAX, CT_RAY]], rb=ct[c, [CT_RBX, CT_RBY]], e=ct[c, CT_E],
                      mu_s=ct[c, CT_MU_S], mu_k=ct[c, CT_MU_K], v_t=ct[c, CT_V_T],
-                     bv=ct[c, [CT_BVX, CT_BVY]], bw=ct[c, CT_BW]) for c in range(nc)]
-    key = x[:n].copy()
+                     bv=ct[c, [CT_BVX, CT_BVY]], bw=ct[c, CT_BW], ln=warm.get(c, (0, 0))[0],
+                     lt=warm.get(c, (0, 0))[1]) for c in range(nc)]
     v = np.stack([vx[:n], vy[:n]], 1).copy()
     w = wz[:n].copy()
     types = s.part_type[:n]
-    sweeps_ref(contacts, v, w, sim.pt[types, PT_INV_MASS], sim.pt[types, PT_INV_INERTIA], key,
-               passes=3)
-    prepare_contacts(nc, ct, cidx, s.part_type, sim.pt, 3, key, sim.mp)
-    solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, key, sim.mp, sim.acc)
+    impulses = sweeps_ref(contacts, v, w, sim.pt[types, PT_INV_MASS],
+                          sim.pt[types, PT_INV_INERTIA], passes=3)
+    v0 = (vx[:n].copy(), vy[:n].copy(), wz[:n].copy())
+    prepare_contacts(nc, ct, cidx, s.part_type, sim.pt, sim.mp, vx, vy, wz)
+    assert warm_start(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, prev) == len(warm)
+    solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, sim.mp, sim.acc, prev)
+    limit_energy(n, nc, s.part_type, vx, vy, wz, *v0, sim.pt, prev)
     assert vx[:n] == pytest.approx(v[:, 0], abs=1e-12)
     assert vy[:n] == pytest.approx(v[:, 1], abs=1e-12)
     assert wz[:n] == pytest.approx(w, abs=1e-9)
+    assert prev[:nc, PV_LN] == pytest.approx([i[0] for i in impulses], abs=1e-15)
+    assert prev[:nc, PV_LT] == pytest.approx([i[1] for i in impulses], abs=1e-15)
+    assert np.array_equal(prev[:nc, PV_KA], ct[:nc, CT_KA])
