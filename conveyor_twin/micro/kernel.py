@@ -26,7 +26,7 @@ from conveyor_twin.micro.contacts.broad_phase import update_pairs
 from conveyor_twin.micro.contacts.narrow_phase import detect
 from conveyor_twin.micro.contacts.response import (correct_positions, MODE_PENALTY, penalty_forces,
                                                    prepare_contacts, solve_impulses,
-                                                   limit_energy, warm_start)
+                                                   limit_energy)
 from conveyor_twin.micro.contacts.tables import A_INERTIA, MP_DT, MP_TRACK
 from conveyor_twin.micro.drive import belt_drive, ramp
 from conveyor_twin.micro.sensors import update_barriers
@@ -199,14 +199,13 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                     vy[i] += h * fy[i] * pt[t, PT_INV_MASS]
                     wz[i] += h * tz[i] * pt[t, PT_INV_INERTIA]
             else:
-                prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz)
                 for i in range(n):
                     fx[i] = vx[i]     # velocities before the impulses, for limit_energy
                     fy[i] = vy[i]
                     tz[i] = wz[i]
-                warm_start(nc, ct, cidx, ptype, vx, vy, wz, pt, prev)
+                prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, fx, fy, tz, prev)
                 solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev)
-                limit_energy(n, nc, ptype, vx, vy, wz, fx, fy, tz, pt, prev)
+                limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, fx, fy, tz, pt, prev)
             for i in range(n):
                 if impulse:
                     fx[i] = x[i]      # positions at detection, for correct_positions

@@ -161,7 +161,7 @@ def impulse_ref(va, wa, ma_inv, ia_inv, ra, vb, wb, mb_inv, ib_inv, rb, n, e, mu
 
 def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np.ndarray,
                i_inv: np.ndarray, passes: int) -> List[Tuple[float, float]]:
-    """Apply the impulses of :func:`conveyor_twin.micro.contacts.response.warm_start`,
+    """Apply the impulses of :func:`conveyor_twin.micro.contacts.response.prepare_contacts`,
     :func:`~conveyor_twin.micro.contacts.response.solve_impulses` and
     :func:`~conveyor_twin.micro.contacts.response.limit_energy`; return the accumulated
     (normal, tangential) impulse of each contact.
@@ -232,8 +232,15 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
     dv, dw = v - v0, w - w0
     g = float(np.sum(m[:, None] * v0 * dv) + np.sum(inertia * w0 * dw))
     q = 0.5 * float(np.sum(m[:, None] * dv * dv) + np.sum(inertia * dw * dw))
-    if g + q > 0.0:
-        s = -g / q if g < 0.0 else 0.0
+    work = 0.0
+    for (ln, lt), c in zip(acc, contacts):
+        if c['b'] < 0:
+            n = np.asarray(c['n'], dtype=float)
+            rb = c['rb']
+            u = np.asarray(c['bv'], dtype=float) + c['bw'] * np.array([-rb[1], rb[0]])
+            work += (ln * n + lt * np.array([-n[1], n[0]])) @ u
+    if g + q > work:
+        s = max((work - g) / q, 0.0)
         v[:] = v0 + s * dv
         w[:] = w0 + s * dw
         acc = [[s * ln, s * lt] for ln, lt in acc]

@@ -28,7 +28,8 @@ PT_MU_S = 10          # static impact friction
 PT_MU_K = 11          # sliding impact friction
 PT_V_T = 12           # friction transition speed [m/s]
 PT_SPIN_ARM = 13      # mean distance of the footprint from the centre [m] (belt torque)
-PT_COLUMNS = 14
+PT_INERTIA = 14       # [kg m^2]
+PT_COLUMNS = 15
 
 SHAPE_DISC = 0
 SHAPE_BOX = 1
@@ -81,6 +82,7 @@ def part_table(part_types: Sequence[PartType]) -> np.ndarray:
         row[PT_MASS] = p.mass
         row[PT_INV_MASS] = 1.0 / p.mass
         row[PT_INV_INERTIA] = 1.0 / p.inertia
+        row[PT_INERTIA] = p.inertia
         row[PT_E] = p.restitution
         row[PT_MU_S] = p.friction_static
         row[PT_MU_K] = p.friction_sliding

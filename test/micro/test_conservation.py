@@ -103,7 +103,7 @@ def test_dense_walled_packing_never_gains_kinetic_energy():
              wall('e', (x1, y0), (x1, y1), restitution=0.5, friction=0.3),
              wall('n', (x1, y1), (x0, y1), restitution=0.5, friction=0.3),
              wall('w', (x0, y1), (x0, y0), restitution=0.5, friction=0.3))
-    cell = weightless(make_cell(part_types=(part,), obstacles=walls, width=0.5))
+    cell = weightless(make_cell(part_types=(part,), obstacles=walls, width=0.5, capacity=1024))
     sim = MicroSim(cell, seed=0)
     rng = np.random.default_rng(11)
     spacing = R * np.sqrt(2 * np.pi / (0.6 * np.sqrt(3.0)))     # 60 % area fraction

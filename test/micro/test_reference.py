@@ -11,7 +11,7 @@ from conveyor_twin.micro.contacts import (CT_BVX, CT_BVY, CT_BW, CT_E, CT_KA, CT
                                           CT_LT, CT_MU_K, CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY,
                                           CT_RBX, CT_RBY, CT_V_T, detect, limit_energy,
                                           prepare_contacts, PV_KA, PV_KB, PV_LN, PV_LT,
-                                          solve_impulses, update_pairs, warm_start)
+                                          solve_impulses, update_pairs)
 from conveyor_twin.micro.kernel import CF_SKIN
 from conveyor_twin.micro.reference import box_core, collide_ref, sweeps_ref
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
@@ -107,10 +107,10 @@ def test_impulse_sweeps_match_reference():
     impulses = sweeps_ref(contacts, v, w, sim.pt[types, PT_INV_MASS],
                           sim.pt[types, PT_INV_INERTIA], passes=3)
     v0 = (vx[:n].copy(), vy[:n].copy(), wz[:n].copy())
-    prepare_contacts(nc, ct, cidx, s.part_type, sim.pt, sim.mp, vx, vy, wz)
-    assert warm_start(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, prev) == len(warm)
+    assert prepare_contacts(nc, ct, cidx, s.part_type, sim.pt, sim.mp, vx, vy, wz, *v0,
+                            prev) == len(warm)
     solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, sim.mp, sim.acc, prev)
-    limit_energy(n, nc, s.part_type, vx, vy, wz, *v0, sim.pt, prev)
+    limit_energy(n, nc, ct, cidx, s.part_type, vx, vy, wz, *v0, sim.pt, prev)
     assert vx[:n] == pytest.approx(v[:, 0], abs=1e-12)
     assert vy[:n] == pytest.approx(v[:, 1], abs=1e-12)
     assert wz[:n] == pytest.approx(w, abs=1e-9)

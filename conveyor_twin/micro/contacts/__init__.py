@@ -18,6 +18,5 @@ from conveyor_twin.micro.contacts.narrow_phase import detect, part_shape, scratc
 from conveyor_twin.micro.contacts.response import (  # noqa: F401
     correct_positions, friction_coefficient, impulse_response, limit_energy, MODE_IMPULSE,
     MODE_PENALTY,
-    penalty_force, penalty_forces, prepare_contacts, RESTITUTION_THRESHOLD, solve_impulses,
-    warm_start)
+    penalty_force, penalty_forces, prepare_contacts, RESTITUTION_THRESHOLD, solve_impulses)
 from conveyor_twin.micro.contacts.tables import *  # noqa: F401,F403

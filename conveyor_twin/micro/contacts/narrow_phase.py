@@ -250,7 +250,7 @@ def scratch(capacity: int):
     """Return the scratch arrays of the contact kernels: (cand, va, vb, out, ct, cidx, prev).
 
     ``prev`` (C + 1, PV_COLUMNS) keeps the previous substep's keys and impulses (row C: their
-    count) for the warm start of :func:`conveyor_twin.micro.contacts.response.warm_start`.
+    count) for the warm start in :func:`conveyor_twin.micro.contacts.response.prepare_contacts`.
     """
     size = CONTACTS_PER_PART * capacity
     return (np.zeros(capacity + 1, dtype=np.int64), np.zeros((4, 2)), np.zeros((4, 2)),

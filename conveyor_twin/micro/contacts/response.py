@@ -43,7 +43,7 @@ from conveyor_twin.micro.contacts.tables import (A_CONTACT_FRICTION, A_DAMPER, A
                                                  CT_WA, CT_WB, MP_CORRECTION, MP_DAMPING, MP_DT,
                                                  MP_SLOP, MP_STIFFNESS, MP_TRACK, PV_KA, PV_KB,
                                                  PV_LN, PV_LT)
-from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
+from conveyor_twin.micro.state import PT_INERTIA, PT_INV_INERTIA, PT_INV_MASS, PT_MASS
 
 # Below this approach speed [m/s] a contact is treated as plastic (no bounce).
 RESTITUTION_THRESHOLD = 0.02
@@ -156,13 +156,26 @@ def _masses(ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny):
 
 
 @njit(cache=True)
-def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz):
-    """Write the per-contact constants of the impulse and position sweeps (one pass).
+def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, v0x, v0y, w0, prev):
+    """Write the per-contact constants of the impulse and position sweeps and apply the warm
+    start (one pass); return how many contacts found their predecessor.
 
-    Geometry only, so the divisions happen here, where they overlap, and the sweeps only
-    multiply: the inverse normal and tangential effective masses, the change of the tangential
-    speed per unit normal impulse, the friction slope and the shares of the position correction
-    (inverse-mass proportion times ``mp[MP_CORRECTION]``).
+    Constants: geometry only, so the divisions happen here, where they overlap, and the sweeps
+    only multiply: the inverse normal and tangential effective masses, the change of the
+    tangential speed per unit normal impulse, the friction slope and the shares of the
+    position correction (inverse-mass proportion times ``mp[MP_CORRECTION]``). The bounce
+    (``CT_BOUNCE``): ``e`` times the normal approach speed before any impulse of the substep
+    (``v0x``, ``v0y``, ``w0``: the velocities then), 0 below :data:`RESTITUTION_THRESHOLD`.
+
+    Warm start (Catto): a contact takes the accumulated impulses of the previous substep's
+    contact with the same keys (``CT_KA``, ``CT_KB``; both lists ascend in the canonical order,
+    so one merge finds them), the tangential one clamped to ``mu_s`` times the normal one, and
+    applies them to both bodies (``vx``, ``vy``, ``wz``), equal and opposite, at the contact
+    point. In a jam the previous impulses are what holds back the belt's push, so the sweeps
+    start from them instead of building a force chain through hundreds of parts anew every
+    substep.
+
+    :param prev: (C + 1, PV_COLUMNS) the previous contacts' keys and impulses, row C their count.
     """
     frac = mp[MP_CORRECTION]
     last_vt = last_mu_k = last_mu_s = math.nan     # NaN: differs from everything
@@ -171,6 +184,9 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz):
     last_ikn = 0.0
     slope = 0.0
     w = 0.0
+    nprev = int(prev[prev.shape[0] - 1, 0])
+    q = 0
+    found = 0
     for c in range(nc):
         a = cidx[c, 0]
         b = cidx[c, 1]
@@ -183,6 +199,13 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz):
             tb = ptype[b]
             imb = pt[tb, PT_INV_MASS]
             iib = pt[tb, PT_INV_INERTIA]
+            vbx = v0x[b]
+            vby = v0y[b]
+            wb = w0[b]
+        else:
+            vbx = ct[c, CT_BVX]
+            vby = ct[c, CT_BVY]
+            wb = ct[c, CT_BW]
         rax = ct[c, CT_RAX]
         ray = ct[c, CT_RAY]
         rbx = ct[c, CT_RBX]
@@ -215,80 +238,38 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz):
             w = frac / (ima + imb)
         ct[c, CT_WA] = w * ima
         ct[c, CT_WB] = w * imb
-        # restitution from the approach before any impulse of the substep
-        if b >= 0:
-            vbx = vx[b]
-            vby = vy[b]
-            wb = wz[b]
-        else:
-            vbx = ct[c, CT_BVX]
-            vby = ct[c, CT_BVY]
-            wb = ct[c, CT_BW]
-        un = (((vx[a] - wz[a] * ray) - (vbx - wb * rby)) * nx
-              + ((vy[a] + wz[a] * rax) - (vby + wb * rbx)) * ny)
+        un = (((v0x[a] - w0[a] * ray) - (vbx - wb * rby)) * nx
+              + ((v0y[a] + w0[a] * rax) - (vby + wb * rbx)) * ny)
         ct[c, CT_BOUNCE] = ct[c, CT_E] * -un if -un > RESTITUTION_THRESHOLD else 0.0
-
-
-@njit(cache=True)
-def warm_start(nc, ct, cidx, ptype, vx, vy, wz, pt, prev):
-    """Start the substep's impulses from the previous substep's (warm start, Catto) and record
-    each contact's bounce; return how many contacts found their predecessor.
-
-    A contact takes the accumulated impulses of the previous substep's contact with the same
-    keys (``CT_KA``, ``CT_KB``; both lists ascend in the canonical order, so one merge finds
-    them), the tangential one clamped to ``mu_s`` times the normal one, and applies them to
-    both bodies (equal and opposite, at the contact point). The bounce (``CT_BOUNCE``) is ``e``
-    times the normal approach speed before any impulse of the substep (0 below
-    :data:`RESTITUTION_THRESHOLD`). In a jam the previous impulses are what holds back the
-    belt's push, so the sweeps start from them instead of building a force chain through
-    hundreds of parts anew every substep.
-
-    :param prev: (C + 1, PV_COLUMNS) the previous contacts' keys and impulses, row C their count.
-    """
-    nprev = int(prev[prev.shape[0] - 1, 0])
-    q = 0
-    found = 0
-    for c in range(nc):
+        # warm start
         ka = ct[c, CT_KA]
         kb = ct[c, CT_KB]
         while q < nprev and (prev[q, PV_KA] < ka or (prev[q, PV_KA] == ka
                                                      and prev[q, PV_KB] < kb)):
             q += 1
         if q < nprev and prev[q, PV_KA] == ka and prev[q, PV_KB] == kb:
-            ln = prev[q, PV_LN]
-            limit = ct[c, CT_MU_S] * ln
-            lt = min(max(prev[q, PV_LT], -limit), limit)
             found += 1
-            a = cidx[c, 0]
-            b = cidx[c, 1]
-            nx = ct[c, CT_NX]
-            ny = ct[c, CT_NY]
-            rax = ct[c, CT_RAX]
-            ray = ct[c, CT_RAY]
-            rbx = ct[c, CT_RBX]
-            rby = ct[c, CT_RBY]
+            ln = prev[q, PV_LN]
+            limit = mu_s * ln
+            lt = min(max(prev[q, PV_LT], -limit), limit)
             ct[c, CT_LN] = ln
             ct[c, CT_LT] = lt
             px = ln * nx - lt * ny
             py = ln * ny + lt * nx
-            ta = ptype[a]
-            ima = pt[ta, PT_INV_MASS]
             vx[a] += px * ima
             vy[a] += py * ima
-            wz[a] += pt[ta, PT_INV_INERTIA] * (rax * py - ray * px)
+            wz[a] += iia * (rax * py - ray * px)
             if b >= 0:
-                tb = ptype[b]
-                imb = pt[tb, PT_INV_MASS]
                 vx[b] -= px * imb
                 vy[b] -= py * imb
-                wz[b] -= pt[tb, PT_INV_INERTIA] * (rbx * py - rby * px)
+                wz[b] -= iib * (rbx * py - rby * px)
     return found
 
 
 @njit(cache=True)
 def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
-    """Apply the contacts' impulses in ``passes`` sweeps (canonical order) after
-    :func:`warm_start`; keep the keys and accumulated impulses in ``prev`` for the next substep.
+    """Apply the contacts' impulses in ``passes`` sweeps (canonical order) after the warm start
+    of :func:`prepare_contacts`; keep the keys and accumulated impulses in ``prev`` for the next substep.
 
     Sequential impulses with accumulated impulses (Catto): every impulse acts on both bodies of
     its contact, equal and opposite, at the contact point (the same point for both, so the
@@ -304,7 +285,7 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
 
     The sweeps are Gauss-Seidel: each contact sees the velocities left by the ones before it,
     so the per-contact work is a dependency chain; the records must have been prepared by
-    :func:`prepare_contacts` and :func:`warm_start` (the sweeps only multiply).
+    :func:`prepare_contacts` (the sweeps only multiply).
     """
     track = mp[MP_TRACK] != 0.0
     for it in range(passes):
@@ -384,38 +365,51 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
 
 
 @njit(cache=True)
-def limit_energy(n, nc, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev):
-    """Scale the substep's contact impulses so they do not raise the parts' kinetic energy.
+def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev):
+    """Scale the substep's contact impulses so the parts' kinetic energy does not rise by more
+    than the work of the moving actuators.
 
-    ``v0x``, ``v0y``, ``w0``: the velocities before :func:`warm_start`. All the substep's
-    impulses together changed them by ``dv``; scaled by ``s`` the kinetic energy changes by
-    ``s g + s^2 q`` (``g = sum m v0 . dv + I w0 dw``, ``q = sum (m dv^2 + I dw^2) / 2``). If
-    that is positive at ``s = 1`` (a warm start pushed apart bodies that no longer press on
-    each other, or friction let go of what it held) the largest ``s`` that keeps the energy is
-    taken, ``-g / q`` (0 if ``g >= 0``), and the impulses kept for the next warm start are
-    scaled alike. Every impulse keeps its partner, so momentum stays; in a jam held against the
-    belt the impulses take back what the belt added (``g ~ -2 q``), and nothing changes.
+    ``v0x``, ``v0y``, ``w0``: the velocities before :func:`prepare_contacts`' warm start. All
+    the substep's impulses together changed them by ``dv``; scaled by ``s`` the kinetic energy
+    changes by ``s g + s^2 q`` (``g = sum m v0 . dv + I w0 dw``, ``q = sum (m dv^2 + I dw^2) /
+    2``). A kinematic body moving at ``u`` at a contact does the work ``s W``, ``W = sum J . u``
+    over its contacts' impulses ``J`` on the parts (a contact that does not add energy in the
+    body's frame adds at most that in ours; fixed bodies: ``u = 0``). If ``g + q > W`` (a warm
+    start pushed apart bodies that no longer press on each other, or friction let go of what
+    it held) the largest ``s`` that keeps the balance is taken, ``(W - g) / q`` (0 if that is
+    negative), and the impulses kept for the next warm start are scaled alike. Every impulse
+    keeps its partner, so momentum stays; in a jam held against the belt the impulses take
+    back what the belt added (``g ~ -2 q``), and nothing changes.
     :return: ``s`` (1: unchanged).
     """
     g = 0.0
     q = 0.0
-    qa = 0.0
     for i in range(n):
         t = ptype[i]
         dx = vx[i] - v0x[i]
         dy = vy[i] - v0y[i]
         dw = wz[i] - w0[i]
-        mi = 1.0 / pt[t, PT_INV_MASS]
-        ii = 1.0 / pt[t, PT_INV_INERTIA]
+        mi = pt[t, PT_MASS]
+        ii = pt[t, PT_INERTIA]
         g += mi * (v0x[i] * dx + v0y[i] * dy) + ii * w0[i] * dw
         q += 0.5 * (mi * (dx * dx + dy * dy) + ii * dw * dw)
-        qa += 0.5 * ii * dw * dw
-    prev[prev.shape[0] - 1, 2] = g + q
-    prev[prev.shape[0] - 1, 3] = qa / q if q > 0.0 else 0.0
-    if g + q <= 0.0:
+    # the contacts with fixed and kinematic bodies come last (canonical order)
+    work = 0.0
+    c = nc - 1
+    while c >= 0 and cidx[c, 1] < 0:
+        bw = ct[c, CT_BW]
+        ubx = ct[c, CT_BVX] - bw * ct[c, CT_RBY]
+        uby = ct[c, CT_BVY] + bw * ct[c, CT_RBX]
+        if ubx != 0.0 or uby != 0.0:
+            nx = ct[c, CT_NX]
+            ny = ct[c, CT_NY]
+            ln = ct[c, CT_LN]
+            lt = ct[c, CT_LT]
+            work += (ln * nx - lt * ny) * ubx + (ln * ny + lt * nx) * uby
+        c -= 1
+    if g + q <= work:
         return 1.0
-    s = -g / q if g < 0.0 else 0.0
-    prev[prev.shape[0] - 1, 1] += 1
+    s = max((work - g) / q, 0.0)
     for i in range(n):
         vx[i] = v0x[i] + s * (vx[i] - v0x[i])
         vy[i] = v0y[i] + s * (vy[i] - v0y[i])

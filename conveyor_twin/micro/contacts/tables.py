@@ -81,7 +81,7 @@ CT_WB = 18
 CT_CNT = 19           # change of the tangential speed per unit normal impulse [1/kg]
 CT_KA = 20            # key: id of a (+ 2^40 against a fixed or kinematic body) [-]
 CT_KB = 21            # key: 2 (id of b, or the shape's index) + the contact point's index [-]
-# written by :func:`warm_start` and the impulse sweeps
+# written by :func:`prepare_contacts` (the bounce, the warm start) and the impulse sweeps
 CT_BOUNCE = 22        # normal separation speed restitution asks for [m/s]
 CT_LN = 23            # accumulated normal impulse of the substep [N s]
 CT_LT = 24            # accumulated tangential impulse [N s]
