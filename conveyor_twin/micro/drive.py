@@ -84,18 +84,15 @@ def surface_velocity(belts, speed, px, py, floor_mu):
 
 
 @njit(cache=True)
-def belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, speed, mp, acc, key):
+def belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, speed, mp, acc):
     """Apply one substep of surface friction to parts 0..n-1 (velocities in place).
 
     :param speed: float64[B] actual belt speeds [m/s]. :param mp: model parameters.
     :param acc: activities; the belt's gets ``|F . slip| dt`` when tracking.
-    :param key: float64[capacity] (output): each part's position along the direction of the
-        belt under it [m], as :func:`belt_key` (found with the same belt look-up).
     """
     g_dt = mp[MP_GRAVITY] * mp[MP_DT]
     floor_mu = mp[MP_FLOOR_MU]
     track = mp[MP_TRACK] != 0.0
-    nb = belts.shape[0]
     for i in range(n):
         t = ptype[i]
         b = belt_under(belts, x[i], y[i])
@@ -103,12 +100,10 @@ def belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, speed, mp, acc, key):
             bvx = speed[b] * belts[b, BT_DX]
             bvy = speed[b] * belts[b, BT_DY]
             mu = belts[b, BT_MU]
-            key[i] = x[i] * belts[b, BT_DX] + y[i] * belts[b, BT_DY]
         else:
             bvx = 0.0
             bvy = 0.0
             mu = floor_mu
-            key[i] = x[i] * belts[0, BT_DX] + y[i] * belts[0, BT_DY] if nb else x[i]
         dvx = bvx - vx[i]
         dvy = bvy - vy[i]
         d = math.sqrt(dvx * dvx + dvy * dvy)
@@ -135,26 +130,3 @@ def belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, speed, mp, acc, key):
             wz[i] = w - w_limit if w > 0.0 else w + w_limit
             if track:
                 acc[A_BELT] += (w_limit / pt[t, PT_INV_INERTIA]) * (abs(w) - 0.5 * w_limit)
-
-
-@njit(cache=True)
-def belt_key(n, x, y, belts, key):
-    """Write each part's position along the direction of the belt under it [m] into ``key``.
-
-    Off the belts the first belt's direction is used. Shock propagation treats the part with
-    the larger key (further downstream) as the support of the other.
-    """
-    for i in range(n):
-        k = 0
-        for b in range(belts.shape[0]):
-            rx = x[i] - belts[b, BT_SX]
-            ry = y[i] - belts[b, BT_SY]
-            u = rx * belts[b, BT_DX] + ry * belts[b, BT_DY]
-            w = ry * belts[b, BT_DX] - rx * belts[b, BT_DY]
-            if 0.0 <= u <= belts[b, BT_LENGTH] and abs(w) <= belts[b, BT_HALF_WIDTH]:
-                k = b
-                break
-        if belts.shape[0]:
-            key[i] = x[i] * belts[k, BT_DX] + y[i] * belts[k, BT_DY]
-        else:
-            key[i] = x[i]

@@ -133,7 +133,6 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
     fy = W[1]
     tz = W[2]
     ke = W[3]
-    key = W[4]
     na = apar.shape[0]
     passes = int(cfg[CF_PASSES])
     position_passes = int(cfg[CF_POSITION_PASSES])
@@ -176,9 +175,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                     t = ptype[i]
                     ke[i] = 0.5 * ((vx[i] * vx[i] + vy[i] * vy[i]) / pt[t, PT_INV_MASS]
                                    + wz[i] * wz[i] / pt[t, PT_INV_INERTIA])
-            # also the parts' keys along their belts (positions do not change until the
-            # integration, so they are those belt_key would give at the contacts' detection)
-            belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, belt_v[BV_SPEED], mp, acc, key)
+            belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, belt_v[BV_SPEED], mp, acc)
             if mode == MODE_PENALTY:
                 for i in range(n):
                     fx[i] = 0.0

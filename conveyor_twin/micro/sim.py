@@ -50,11 +50,11 @@ from conveyor_twin.micro.state import (C_CONTACTS_FULL, C_ENTERED, C_EVENTS,
 EVENT_CAPACITY = 4096
 # Penalty model: largest omega * dt of the stiffest contact (symplectic Euler is stable < 2).
 PENALTY_OMEGA_DT = 0.5
-# Impulse model: sweeps over the contacts per substep (the first with restitution; the others
-# plastic, touching only contacts still closing: they matter only where contacts share bodies,
-# as in a jam). 1 is Hoher et al.'s single pass; it does not hold a jam (discs overlap by up to a
-# diameter, see the docstring of contacts.response), so 2.
+# Impulse model: sweeps over the contacts per substep, warm-started from the previous substep's
+# impulses (see the docstring of contacts.response); further sweeps change nothing for isolated
+# impacts and matter where contacts share bodies, as in a jam.
 CONTACT_PASSES = 2
+# Impulse model: sweeps of the penetration correction per substep.
 POSITION_PASSES = 2
 # Neighbour list skin as a fraction of the smallest part radius: a part may move 0.49 of it
 # before the list is rebuilt (in a jam it lives for many steps; in free flow at 0.5 m/s with
@@ -116,6 +116,8 @@ class MicroSim:
     :param event_capacity: size of the light-barrier events buffer.
     :param passes: impulse model: sweeps over the contacts per substep (see
         :data:`CONTACT_PASSES`).
+    :param position_passes: impulse model: sweeps of the penetration correction per substep
+        (see :data:`POSITION_PASSES`).
     """
 
     def __init__(self, cell: Cell, *, seed: int, region: Optional[Region] = None,
@@ -182,7 +184,7 @@ class MicroSim:
         self._cell_table = grid_table(self.grid.cells)
         self._cell_items = np.zeros(cap, dtype=np.int64)
         self._part_cell = np.zeros(cap, dtype=np.int64)
-        self._W = np.zeros((5, cap))
+        self._W = np.zeros((4, cap))
         (self._cand, self._va, self._vb, self._out, self._ct, self._cidx,
          self._prev) = scratch(cap)
         self._nbr, self._pos0 = neighbour_arrays(cap)

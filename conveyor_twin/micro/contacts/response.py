@@ -1,35 +1,50 @@
-"""Contact response: impulses (Hoher et al.) or penalty spring-dampers (Rideout, Stein).
+"""Contact response: impulses (sequential impulses) or penalty spring-dampers (Rideout, Stein).
 
-Impulse model: one algebraic impulse per contact point, no iteration. With the relative
-velocity ``u`` of A against B at the contact and the unit normal ``n`` pointing to A:
-``j = -(1 + e) u_n / (1/m_a + 1/m_b + (r_a x n)^2 / I_a + (r_b x n)^2 / I_b)`` when ``u_n < 0``;
-then a tangential impulse that would stop the sliding, clamped to ``mu(|u_t|) j`` (Coulomb,
-Horváth et al.'s speed-dependent coefficient: static at rest, sliding above the transition speed,
-linear in between). Restitution acts only above :data:`RESTITUTION_THRESHOLD` so resting
-contacts (a part pressed on a wall by the belt) do not chatter. Overlap beyond the slop is
-removed by moving the bodies apart along ``n`` (in inverse-mass proportion) every substep.
+Impulse model: equal and opposite impulses at each contact point, applied to both bodies at the
+point's arms (``r_a``, ``r_b`` from one point), mass- and inertia-weighted through the effective
+masses ``k_n = 1/m_a + 1/m_b + (r_a x n)^2 / I_a + (r_b x n)^2 / I_b`` (fixed and kinematic
+bodies: infinite mass). They are solved as sequential impulses (Catto; Erleben's projected
+Gauss-Seidel): :data:`~conveyor_twin.micro.sim.CONTACT_PASSES` sweeps over the contacts in the
+canonical order, each contact's normal impulse accumulated over the substep and kept >= 0, the
+tangential one kept within ``mu(|u_t|)`` times the normal one (Coulomb, Horváth et al.'s
+speed-dependent coefficient: static at rest, sliding above the transition speed, linear in
+between), each sweep starting from the impulses of the same contact one substep earlier (warm
+start: in a jam they are what holds back the belt's push, so the force chain through hundreds of
+parts need not be built anew every substep). Restitution (Newton's law) acts on the normal
+approach speed before any impulse of the substep, only above :data:`RESTITUTION_THRESHOLD`, so
+resting contacts do not chatter; an isolated impact gets exactly :func:`impulse_response`.
+
+What holds, to round-off, in every sweep: total linear and angular momentum (each impulse has
+its partner, at the same point); no increment adds kinetic energy (a normal increment at most
+reverses the current approach, down to the bounce; a tangential one at most reverses the current
+sliding). The warm start can (a stale impulse pushing apart bodies that no longer press on each
+other), so :func:`limit_energy` scales all of a substep's impulses, if needed, so the parts'
+kinetic energy does not rise by more than the moving actuators' work; in a held jam it changes
+nothing. Penetration beyond the slop is removed by moving positions only
+(:func:`correct_positions`, :data:`~conveyor_twin.micro.sim.POSITION_PASSES` sweeps, inverse-mass
+proportion along ``n``): it never feeds into velocities, so it adds no energy and no momentum (the
+centre of mass stays; the angular momentum about a fixed point changes by ``m dx x v`` where
+bodies slide past each other while they overlap).
+
+Why warm starting, although Hoher et al. solve each contact once: every contact is still solved
+a fixed number of times per substep (no iteration to a tolerance, so cost and result stay
+time-deterministic), but momentum-conserving sweeps without memory do not hold a jam: on the
+benchmark jam (``conveyor-twin bench micro`` scene, 10 mm discs, 3 s) two such sweeps let the
+discs overlap by 9.6 mm (N = 1000) and 10 mm (N = 5000), i.e. parts pass through each other under
+the belt's push, because a sweep carries an impulse only a contact or two further. With the warm
+start and the same two sweeps the jam comes to rest and the overlaps stay below half a
+millimetre (see :mod:`conveyor_twin.bench.micro`).
 
 Penalty model: a spring-damper per contact point, ``f_n = max(0, k d - c u_n)``, and a Coulomb
 friction force ``min(mu f_n, |u_t| / (k_t dt))`` against the sliding (the second term stops it
 within one substep without reversing it); no position correction.
 
-Why two sweeps in the impulse model (``CONTACT_PASSES = 2`` in :mod:`conveyor_twin.micro.sim`),
-although Hoher et al. solve each contact once: every contact is still one algebraic equation,
-solved a fixed number of times per substep (no iteration to a tolerance, so cost and result stay
-time-deterministic), but a single sweep does not hold a jam. The second sweep is a plastic
-shock-propagation sweep (the downstream body of a pair counts as fixed) over the same contacts, and
-the position correction does the same. Measured on the benchmark jam (``conveyor-twin bench micro``
-scene, 4 s, checked every 0.1 s): with one sweep the deepest disc overlap reaches 9.7 mm (N = 300),
-10.0 mm (N = 1000) and 9.99 mm (N = 5000) for 10 mm discs, i.e. parts pass through each other under
-the belt's push (each substep's correction of 80 % of a contact's excess is undone by the next rows
-pushing); with two sweeps it stays at 0.24, 0.24 and 0.93 mm. So the second sweep stays;
-"penetration resolved every step" needs it once contacts share bodies.
-
 The interface: the narrow phase's records ``ct`` (C, CT_COLUMNS) and bodies ``cidx`` (C, 2)
-(``nc`` of them, canonical order) in; the parts' velocities (impulse model:
-:func:`prepare_contacts`, :func:`solve_impulses`; penalty model: :func:`penalty_forces` into
-force arrays) and positions (:func:`correct_positions`) updated in place, the activities
-``acc`` accumulated. Nothing here looks at geometry beyond the records.
+(``nc`` of them, canonical order) in, with ``prev`` (the previous substep's keys and impulses);
+the parts' velocities (impulse model: :func:`prepare_contacts`, :func:`solve_impulses`,
+:func:`limit_energy`; penalty model: :func:`penalty_forces` into force arrays) and positions
+(:func:`correct_positions`) updated in place, the activities ``acc`` accumulated. Nothing here
+looks at geometry beyond the records.
 """
 
 import math
