@@ -104,8 +104,9 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
     :param grid: ``(gpar, gdim, cell_table, cell_items, part_cell, cand, nbr, pos0)``: the
         broad phase's grid and neighbour list.
     :param statics: ``(static_start, static_items, shp, shp_verts)``: static shapes per cell.
-    :param contacts: ``(va, vb, out, ct, cidx, acc)``: narrow-phase scratch, contact records,
-        activities.
+    :param contacts: ``(va, vb, out, ct, cidx, acc, prev, island, island_sums)``: narrow-phase
+        scratch, contact records, activities, the previous substep's contacts (warm start) and
+        the scratch of the energy limit.
     :param sources: ``(src, src_next, src_state, rng)``; ``exits``: ``(sinks, sink_count,
         region, ob_id, ob_type, ob_P)``; ``barriers``: ``(lb, blocked, edge_count, last_part,
         ev_i, ev_f)``.
@@ -115,7 +116,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
     belts, belt_v, apar, act_v, act_state, act_verts = drives
     gpar, gdim, cell_table, cell_items, part_cell, cand, nbr, pos0 = grid
     static_start, static_items, shp, shp_verts = statics
-    va, vb, out, ct, cidx, acc, prev = contacts
+    va, vb, out, ct, cidx, acc, prev, island, island_sums = contacts
     src, src_next, src_state, rng = sources
     sinks, sink_count, region, ob_id, ob_type, ob_P = exits
     lb, blocked, edge_count, last_part, ev_i, ev_f = barriers
@@ -202,7 +203,8 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                     tz[i] = wz[i]
                 prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, fx, fy, tz, prev)
                 solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev)
-                limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, fx, fy, tz, pt, prev)
+                limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, fx, fy, tz, pt, prev, island,
+                             island_sums)
             for i in range(n):
                 if impulse:
                     fx[i] = x[i]      # positions at detection, for correct_positions

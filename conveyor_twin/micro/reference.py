@@ -227,23 +227,39 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
             jt = min(max(jt, min(0.0, 2 * dt)), max(0.0, 2 * dt))
             apply(c, jt * t)
             acc[k] = [ln1, lt + jt]
-    # no rise of the kinetic energy
+    # no rise of the kinetic energy of any island (parts joined by contacts) beyond the work
+    # of moving kinematic bodies
+    island = list(range(len(v)))
+
+    def root(i):
+        while island[i] != i:
+            i = island[i]
+        return i
+
+    for c in contacts:
+        if c['b'] >= 0:
+            ra, rb = root(c['a']), root(c['b'])
+            island[max(ra, rb)] = min(ra, rb)
+    roots = np.array([root(i) for i in range(len(v))])
     m, inertia = 1.0 / m_inv, 1.0 / i_inv
     dv, dw = v - v0, w - w0
-    g = float(np.sum(m[:, None] * v0 * dv) + np.sum(inertia * w0 * dw))
-    q = 0.5 * float(np.sum(m[:, None] * dv * dv) + np.sum(inertia * dw * dw))
-    work = 0.0
-    for (ln, lt), c in zip(acc, contacts):
-        if c['b'] < 0:
-            n = np.asarray(c['n'], dtype=float)
-            rb = c['rb']
-            u = np.asarray(c['bv'], dtype=float) + c['bw'] * np.array([-rb[1], rb[0]])
-            work += (ln * n + lt * np.array([-n[1], n[0]])) @ u
-    if g + q > work:
-        s = max((work - g) / q, 0.0)
-        v[:] = v0 + s * dv
-        w[:] = w0 + s * dw
-        acc = [[s * ln, s * lt] for ln, lt in acc]
+    factor = np.ones(len(v))
+    for r in set(roots.tolist()):
+        k = roots == r
+        g = float(np.sum(m[k, None] * v0[k] * dv[k]) + np.sum(inertia[k] * w0[k] * dw[k]))
+        q = 0.5 * float(np.sum(m[k, None] * dv[k] ** 2) + np.sum(inertia[k] * dw[k] ** 2))
+        work = 0.0
+        for (ln, lt), c in zip(acc, contacts):
+            if c['b'] < 0 and roots[c['a']] == r:
+                n = np.asarray(c['n'], dtype=float)
+                rb = c['rb']
+                u = np.asarray(c['bv'], dtype=float) + c['bw'] * np.array([-rb[1], rb[0]])
+                work += (ln * n + lt * np.array([-n[1], n[0]])) @ u
+        if g + q > work and q > 0.0:
+            factor[k] = max((work - g) / q, 0.0)
+    v[:] = v0 + factor[:, None] * dv
+    w[:] = w0 + factor * dw
+    acc = [[factor[c['a']] * ln, factor[c['a']] * lt] for (ln, lt), c in zip(acc, contacts)]
     return [(ln, lt) for ln, lt in acc]
 
 

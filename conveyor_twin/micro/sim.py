@@ -185,8 +185,8 @@ class MicroSim:
         self._cell_items = np.zeros(cap, dtype=np.int64)
         self._part_cell = np.zeros(cap, dtype=np.int64)
         self._W = np.zeros((4, cap))
-        (self._cand, self._va, self._vb, self._out, self._ct, self._cidx,
-         self._prev) = scratch(cap)
+        (self._cand, self._va, self._vb, self._out, self._ct, self._cidx, self._prev,
+         self._island, self._island_sums) = scratch(cap)
         self._nbr, self._pos0 = neighbour_arrays(cap)
         self.acc = np.zeros(A_COLUMNS)
         # sources, sinks, region
@@ -219,7 +219,8 @@ class MicroSim:
             (self.grid.gpar, self.grid.gdim, self._cell_table, self._cell_items,
              self._part_cell, self._cand, self._nbr, self._pos0),
             (self.grid.static_start, self.grid.static_items, self.shapes, self.shape_verts),
-            (self._va, self._vb, self._out, self._ct, self._cidx, self.acc, self._prev),
+            (self._va, self._vb, self._out, self._ct, self._cidx, self.acc, self._prev,
+             self._island, self._island_sums),
             (self.src, self.src_next, self.src_state, self.rng),
             (self.sinks, self.sink_count, self.region_array, self._ob_id, self._ob_type,
              self._ob_P),

@@ -116,8 +116,8 @@ def _fixed(i, ka, kb, ptype, x, y, yaw, pt, va, vb, nb, rb, bvx, bvy, bw, bpx, b
 
 
 @njit(cache=True)
-def detect(n, ids, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, shp, shp_verts,
-           act_state, act_verts, va, vb, out, ct, cidx):
+def detect(n, ids, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, shp,
+           shp_verts, act_state, act_verts, va, vb, out, ct, cidx):
     """Record every contact of parts 0..n-1 in the canonical order; return how many.
 
     :param ids: the parts' ids (ascending): with the shape index or the point they key the
@@ -247,12 +247,16 @@ def detect(n, ids, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_it
 
 
 def scratch(capacity: int):
-    """Return the scratch arrays of the contact kernels: (cand, va, vb, out, ct, cidx, prev).
+    """Return the arrays of the contact kernels: (cand, va, vb, out, ct, cidx, prev, parent,
+    acc3).
 
     ``prev`` (C + 1, PV_COLUMNS) keeps the previous substep's keys and impulses (row C: their
-    count) for the warm start in :func:`conveyor_twin.micro.contacts.response.prepare_contacts`.
+    count) for the warm start in :func:`conveyor_twin.micro.contacts.response.prepare_contacts`;
+    ``parent`` (int64, capacity) and ``acc3`` ((3, capacity)) are the scratch of
+    :func:`conveyor_twin.micro.contacts.response.limit_energy`.
     """
     size = CONTACTS_PER_PART * capacity
     return (np.zeros(capacity + 1, dtype=np.int64), np.zeros((4, 2)), np.zeros((4, 2)),
             np.zeros(8), np.zeros((size, CT_COLUMNS)), np.zeros((size, 2), dtype=np.int64),
-            np.zeros((size + 1, PV_COLUMNS)))
+            np.zeros((size + 1, PV_COLUMNS)), np.zeros(capacity, dtype=np.int64),
+            np.zeros((3, capacity)))

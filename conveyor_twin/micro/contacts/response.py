@@ -52,12 +52,13 @@ import math
 from numba import njit
 
 from conveyor_twin.micro.contacts.tables import (A_CONTACT_FRICTION, A_DAMPER, A_SPRING, CT_BOUNCE,
-                                                 CT_BVX, CT_KA, CT_KB, CT_LN, CT_LT, CT_BVY, CT_BW, CT_CNT, CT_DEPTH, CT_E,
-                                                 CT_IKN, CT_IKT, CT_MU_K, CT_MU_S, CT_NX, CT_NY,
-                                                 CT_RAX, CT_RAY, CT_RBX, CT_RBY, CT_SLOPE, CT_V_T,
-                                                 CT_WA, CT_WB, MP_CORRECTION, MP_DAMPING, MP_DT,
-                                                 MP_SLOP, MP_STIFFNESS, MP_TRACK, PV_KA, PV_KB,
-                                                 PV_LN, PV_LT)
+                                                 CT_BVX, CT_BVY, CT_BW, CT_CNT, CT_DEPTH, CT_E,
+                                                 CT_IKN, CT_IKT, CT_KA, CT_KB, CT_LN, CT_LT,
+                                                 CT_MU_K, CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY,
+                                                 CT_RBX, CT_RBY, CT_SLOPE, CT_V_T, CT_WA, CT_WB,
+                                                 MP_CORRECTION, MP_DAMPING, MP_DT, MP_SLOP,
+                                                 MP_STIFFNESS, MP_TRACK, PV_KA, PV_KB, PV_LN,
+                                                 PV_LT)
 from conveyor_twin.micro.state import PT_INERTIA, PT_INV_INERTIA, PT_INV_MASS, PT_MASS
 
 # Below this approach speed [m/s] a contact is treated as plastic (no bounce).
@@ -284,7 +285,8 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, v0x, v0y, w0, prev
 @njit(cache=True)
 def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
     """Apply the contacts' impulses in ``passes`` sweeps (canonical order) after the warm start
-    of :func:`prepare_contacts`; keep the keys and accumulated impulses in ``prev`` for the next substep.
+    of :func:`prepare_contacts`; keep the keys and accumulated impulses in ``prev`` for the
+    next substep.
 
     Sequential impulses with accumulated impulses (Catto): every impulse acts on both bodies of
     its contact, equal and opposite, at the contact point (the same point for both, so the
@@ -379,26 +381,65 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
     prev[prev.shape[0] - 1, 0] = nc
 
 
-@njit(cache=True)
-def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev):
-    """Scale the substep's contact impulses so the parts' kinetic energy does not rise by more
-    than the work of the moving actuators.
+@njit(cache=True, inline='always')
+def _root(parent, i):
+    """Return the representative of ``i``'s island (union-find with path halving)."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
 
-    ``v0x``, ``v0y``, ``w0``: the velocities before :func:`prepare_contacts`' warm start. All
-    the substep's impulses together changed them by ``dv``; scaled by ``s`` the kinetic energy
-    changes by ``s g + s^2 q`` (``g = sum m v0 . dv + I w0 dw``, ``q = sum (m dv^2 + I dw^2) /
-    2``). A kinematic body moving at ``u`` at a contact does the work ``s W``, ``W = sum J . u``
-    over its contacts' impulses ``J`` on the parts (a contact that does not add energy in the
-    body's frame adds at most that in ours; fixed bodies: ``u = 0``). If ``g + q > W`` (a warm
-    start pushed apart bodies that no longer press on each other, or friction let go of what
-    it held) the largest ``s`` that keeps the balance is taken, ``(W - g) / q`` (0 if that is
-    negative), and the impulses kept for the next warm start are scaled alike. Every impulse
-    keeps its partner, so momentum stays; in a jam held against the belt the impulses take
-    back what the belt added (``g ~ -2 q``), and nothing changes.
-    :return: ``s`` (1: unchanged).
+
+@njit(cache=True)
+def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev, parent, acc3):
+    """Scale each island's contact impulses of the substep so its parts' kinetic energy does
+    not rise by more than the work of the moving actuators on them.
+
+    An island is a set of parts joined by contacts (fixed and kinematic bodies join nothing);
+    islands do not exchange impulses, so each is limited alone and a jam does not touch parts
+    elsewhere. ``v0x``, ``v0y``, ``w0``: the velocities before :func:`prepare_contacts`' warm
+    start. All of an island's impulses together changed them by ``dv``; scaled by ``s`` its
+    kinetic energy changes by ``s g + s^2 q`` (``g = sum m v0 . dv + I w0 dw``,
+    ``q = sum (m dv^2 + I dw^2) / 2``). A kinematic body moving at ``u`` at a contact does the
+    work ``s W``, ``W = sum J . u`` over its contacts' impulses ``J`` on the parts (a contact
+    that does not add energy in the body's frame adds at most that in ours; fixed bodies:
+    ``u = 0``). If ``g + q > W`` (a warm start pushed apart bodies that no longer press on each
+    other, or friction let go of what it held) the largest ``s`` that keeps the balance is
+    taken, ``(W - g) / q`` (0 if that is negative), and the island's impulses kept for the next
+    warm start are scaled alike. Every impulse keeps its partner, so momentum stays; in a jam
+    held against the belt the impulses take back what the belt added (``g ~ -2 q``), and
+    nothing changes.
+
+    :param parent: int64[capacity] scratch (the islands); ``acc3``: (3, capacity) scratch.
+    :return: number of islands scaled.
     """
-    g = 0.0
-    q = 0.0
+    for i in range(n):
+        parent[i] = i
+        acc3[0, i] = 0.0
+        acc3[1, i] = 0.0
+        acc3[2, i] = 0.0
+    for c in range(nc):
+        b = cidx[c, 1]
+        if b >= 0:
+            ra = _root(parent, cidx[c, 0])
+            rb = _root(parent, b)
+            if ra != rb:
+                # the smaller index represents (deterministic, independent of other islands)
+                if ra < rb:
+                    parent[rb] = ra
+                else:
+                    parent[ra] = rb
+        else:
+            bw = ct[c, CT_BW]
+            ubx = ct[c, CT_BVX] - bw * ct[c, CT_RBY]
+            uby = ct[c, CT_BVY] + bw * ct[c, CT_RBX]
+            if ubx != 0.0 or uby != 0.0:
+                nx = ct[c, CT_NX]
+                ny = ct[c, CT_NY]
+                ln = ct[c, CT_LN]
+                lt = ct[c, CT_LT]
+                # summed on the part for now, on its island's representative below
+                acc3[2, cidx[c, 0]] += (ln * nx - lt * ny) * ubx + (ln * ny + lt * nx) * uby
     for i in range(n):
         t = ptype[i]
         dx = vx[i] - v0x[i]
@@ -406,33 +447,38 @@ def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev):
         dw = wz[i] - w0[i]
         mi = pt[t, PT_MASS]
         ii = pt[t, PT_INERTIA]
-        g += mi * (v0x[i] * dx + v0y[i] * dy) + ii * w0[i] * dw
-        q += 0.5 * (mi * (dx * dx + dy * dy) + ii * dw * dw)
-    # the contacts with fixed and kinematic bodies come last (canonical order)
-    work = 0.0
-    c = nc - 1
-    while c >= 0 and cidx[c, 1] < 0:
-        bw = ct[c, CT_BW]
-        ubx = ct[c, CT_BVX] - bw * ct[c, CT_RBY]
-        uby = ct[c, CT_BVY] + bw * ct[c, CT_RBX]
-        if ubx != 0.0 or uby != 0.0:
-            nx = ct[c, CT_NX]
-            ny = ct[c, CT_NY]
-            ln = ct[c, CT_LN]
-            lt = ct[c, CT_LT]
-            work += (ln * nx - lt * ny) * ubx + (ln * ny + lt * nx) * uby
-        c -= 1
-    if g + q <= work:
-        return 1.0
-    s = max((work - g) / q, 0.0)
+        r = _root(parent, i)
+        parent[i] = r
+        acc3[0, r] += mi * (v0x[i] * dx + v0y[i] * dy) + ii * w0[i] * dw
+        acc3[1, r] += 0.5 * (mi * (dx * dx + dy * dy) + ii * dw * dw)
+        if r != i:
+            acc3[2, r] += acc3[2, i]
+            acc3[2, i] = 0.0
+    scaled = 0
     for i in range(n):
-        vx[i] = v0x[i] + s * (vx[i] - v0x[i])
-        vy[i] = v0y[i] + s * (vy[i] - v0y[i])
-        wz[i] = w0[i] + s * (wz[i] - w0[i])
+        if parent[i] == i:
+            g = acc3[0, i]
+            q = acc3[1, i]
+            work = acc3[2, i]
+            s = 1.0
+            if g + q > work and q > 0.0:
+                s = max((work - g) / q, 0.0)
+                scaled += 1
+            acc3[0, i] = s
+    if scaled == 0:
+        return 0
+    for i in range(n):
+        s = acc3[0, parent[i]]     # paths are compressed to the root by the loop above
+        if s != 1.0:
+            vx[i] = v0x[i] + s * (vx[i] - v0x[i])
+            vy[i] = v0y[i] + s * (vy[i] - v0y[i])
+            wz[i] = w0[i] + s * (wz[i] - w0[i])
     for c in range(nc):
-        prev[c, PV_LN] *= s
-        prev[c, PV_LT] *= s
-    return s
+        s = acc3[0, parent[cidx[c, 0]]]
+        if s != 1.0:
+            prev[c, PV_LN] *= s
+            prev[c, PV_LT] *= s
+    return scaled
 
 
 @njit(cache=True)
