@@ -203,7 +203,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                     tz[i] = wz[i]
                 prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, fx, fy, tz, prev)
                 solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev)
-                limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, fx, fy, tz, pt, island,
+                limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, fx, fy, tz, pt, prev, island,
                              island_sums)
             for i in range(n):
                 if impulse:

@@ -164,8 +164,7 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
     """Apply the impulses of :func:`conveyor_twin.micro.contacts.response.prepare_contacts`,
     :func:`~conveyor_twin.micro.contacts.response.solve_impulses` and
     :func:`~conveyor_twin.micro.contacts.response.limit_energy`; return the accumulated
-    (normal, tangential) impulse of each contact (what the next warm start takes; unscaled
-    by the energy limit).
+    (normal, tangential) impulse of each contact.
 
     :param contacts: dicts with ``a``, ``b`` (-1: fixed), ``n``, ``ra``, ``rb``, ``e``,
         ``mu_s``, ``mu_k``, ``v_t``, ``bv``, ``bw`` and the warm start ``ln``, ``lt`` (the
@@ -260,6 +259,7 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
             factor[k] = max((work - g) / q, 0.0)
     v[:] = v0 + factor[:, None] * dv
     w[:] = w0 + factor * dw
+    acc = [[factor[c['a']] * ln, factor[c['a']] * lt] for (ln, lt), c in zip(acc, contacts)]
     return [(ln, lt) for ln, lt in acc]
 
 

@@ -110,7 +110,7 @@ def test_impulse_sweeps_match_reference():
     assert prepare_contacts(nc, ct, cidx, s.part_type, sim.pt, sim.mp, vx, vy, wz, *v0,
                             prev) == len(warm)
     solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, sim.mp, sim.acc, prev)
-    limit_energy(n, nc, ct, cidx, s.part_type, vx, vy, wz, *v0, sim.pt, sim._island,
+    limit_energy(n, nc, ct, cidx, s.part_type, vx, vy, wz, *v0, sim.pt, prev, sim._island,
                  sim._island_sums)
     assert vx[:n] == pytest.approx(v[:, 0], abs=1e-12)
     assert vy[:n] == pytest.approx(v[:, 1], abs=1e-12)

@@ -391,7 +391,7 @@ def _root(parent, i):
 
 
 @njit(cache=True)
-def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, parent, acc3):
+def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev, parent, acc3):
     """Scale each island's contact impulses of the substep so its parts' kinetic energy does
     not rise by more than the work of the moving actuators on them.
 
@@ -405,11 +405,10 @@ def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, parent, a
     that does not add energy in the body's frame adds at most that in ours; fixed bodies:
     ``u = 0``). If ``g + q > W`` (a warm start pushed apart bodies that no longer press on each
     other, or friction let go of what it held) the largest ``s`` that keeps the balance is
-    taken, ``(W - g) / q`` (0 if that is negative). The impulses kept for the next warm start
-    stay unscaled: they are only where the next substep's sweeps start, and a jam whose force
-    chain shrank with every such substep would be compressed by the belt. Every impulse keeps
-    its partner, so momentum stays; in a jam held against the belt the impulses take back what
-    the belt added (``g ~ -2 q``), and nothing changes.
+    taken, ``(W - g) / q`` (0 if that is negative), and the island's impulses kept for the next
+    warm start are scaled alike. Every impulse keeps its partner, so momentum stays; in a jam
+    held against the belt the impulses take back what the belt added (``g ~ -2 q``), and
+    nothing changes.
 
     :param parent: int64[capacity] scratch (the islands); ``acc3``: (3, capacity) scratch.
     :return: number of islands scaled.
@@ -474,6 +473,11 @@ def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, parent, a
             vx[i] = v0x[i] + s * (vx[i] - v0x[i])
             vy[i] = v0y[i] + s * (vy[i] - v0y[i])
             wz[i] = w0[i] + s * (wz[i] - w0[i])
+    for c in range(nc):
+        s = acc3[0, parent[cidx[c, 0]]]
+        if s != 1.0:
+            prev[c, PV_LN] *= s
+            prev[c, PV_LT] *= s
     return scaled
 
 
