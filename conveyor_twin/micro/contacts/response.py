@@ -416,11 +416,41 @@ def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev, par
     :param parent: int64[capacity] scratch (the islands); ``acc3``: (3, capacity) scratch.
     :return: number of islands scaled.
     """
+    # the work of the moving actuators, per part
+    for i in range(n):
+        acc3[2, i] = 0.0
+    c = nc - 1
+    while c >= 0 and cidx[c, 1] < 0:      # contacts with fixed and kinematic bodies come last
+        bw = ct[c, CT_BW]
+        ubx = ct[c, CT_BVX] - bw * ct[c, CT_RBY]
+        uby = ct[c, CT_BVY] + bw * ct[c, CT_RBX]
+        if ubx != 0.0 or uby != 0.0:
+            nx = ct[c, CT_NX]
+            ny = ct[c, CT_NY]
+            ln = ct[c, CT_LN]
+            lt = ct[c, CT_LT]
+            acc3[2, cidx[c, 0]] += (ln * nx - lt * ny) * ubx + (ln * ny + lt * nx) * uby
+        c -= 1
+    # each part's energy change less that work: if none is positive, no island's sum is
+    rising = False
+    for i in range(n):
+        t = ptype[i]
+        dx = vx[i] - v0x[i]
+        dy = vy[i] - v0y[i]
+        dw = wz[i] - w0[i]
+        mi = pt[t, PT_MASS]
+        ii = pt[t, PT_INERTIA]
+        e = (mi * ((v0x[i] + 0.5 * dx) * dx + (v0y[i] + 0.5 * dy) * dy)
+             + ii * (w0[i] + 0.5 * dw) * dw)
+        if e > acc3[2, i]:
+            rising = True
+            break
+    if not rising:
+        return 0
     for i in range(n):
         parent[i] = i
         acc3[0, i] = 0.0
         acc3[1, i] = 0.0
-        acc3[2, i] = 0.0
     for c in range(nc):
         b = cidx[c, 1]
         if b >= 0:
@@ -432,17 +462,7 @@ def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev, par
                     parent[rb] = ra
                 else:
                     parent[ra] = rb
-        else:
-            bw = ct[c, CT_BW]
-            ubx = ct[c, CT_BVX] - bw * ct[c, CT_RBY]
-            uby = ct[c, CT_BVY] + bw * ct[c, CT_RBX]
-            if ubx != 0.0 or uby != 0.0:
-                nx = ct[c, CT_NX]
-                ny = ct[c, CT_NY]
-                ln = ct[c, CT_LN]
-                lt = ct[c, CT_LT]
-                # summed on the part for now, on its island's representative below
-                acc3[2, cidx[c, 0]] += (ln * nx - lt * ny) * ubx + (ln * ny + lt * nx) * uby
+    # sums per island, on its representative (the work was summed per part above)
     for i in range(n):
         t = ptype[i]
         dx = vx[i] - v0x[i]
