@@ -24,9 +24,9 @@ from numba import njit
 from conveyor_twin.micro.actuators import actuator_shapes, AP_LENGTH, AP_WIDTH
 from conveyor_twin.micro.contacts.broad_phase import update_pairs
 from conveyor_twin.micro.contacts.narrow_phase import detect
-from conveyor_twin.micro.contacts.response import (correct_positions, MODE_PENALTY, penalty_forces,
-                                                   prepare_contacts, solve_impulses,
-                                                   limit_energy)
+from conveyor_twin.micro.contacts.response import (correct_positions, limit_energy, MODE_PENALTY,
+                                                   penalty_forces, prepare_contacts,
+                                                   solve_impulses)
 from conveyor_twin.micro.contacts.tables import A_INERTIA, MP_DT, MP_TRACK
 from conveyor_twin.micro.drive import belt_drive, ramp
 from conveyor_twin.micro.sensors import update_barriers
@@ -44,7 +44,7 @@ CF_MAX_TRAVEL = 3     # largest travel per substep [m]
 CF_PENALTY_DT = 4     # largest stable penalty substep [s]
 CF_MAX_SUB = 5        # most substeps per step
 CF_FLOOR_MU = 6
-CF_PASSES = 7         # impulse model: sweeps over the contacts (velocity and position)
+CF_PASSES = 7         # impulse model: impulse sweeps over the contacts
 CF_SKIN = 8           # neighbour list skin [m] (see contacts.broad_phase.update_pairs)
 CF_POSITION_PASSES = 9  # impulse model: sweeps of the penetration correction
 CF_COLUMNS = 10
