@@ -34,23 +34,18 @@ k = 1e5 N/m both criteria give 2e-4 s (5x): the activity-sized spring, far softe
 is what makes penalty contacts affordable.
 
 Measured on the shared 2-core machine (numba 0.68, pymunk 7.3.1, 2000 warm-up + 2000 timed
-steps) after the neighbour-list broad phase and the fused contact preparation, full run at load
-average ~3.9 from other work (wall clock; pymunk's ``space.step`` alone; ratios by mean and by
-thread-CPU median), plus two N = 1000 runs at load ~2.5:
+steps, load average ~1-2; wall clock; pymunk's ``space.step`` alone):
 
 =====  ============================  =====================  ===========================
-N      ours median / mean [ms]       pymunk step median     pymunk / ours
+N      ours median / mean [ms]       pymunk step mean       pymunk / ours
 =====  ============================  =====================  ===========================
-100    0.032 / 0.048                 (mean 0.22)            4.6x (CPU 4.0x)
-1000   0.222 / 0.346 (p99 4.3)       (mean 5.4)             15.5x (CPU 15.0x)
-1000   0.252-0.257 / 0.275-0.280     not run                -
-5000   1.03 / 2.02                   (mean 39.7)            19.7x (CPU 24.5x)
+1000   0.244 / 0.254 (p99 0.34)      1.73                   6.8x (CPU 6.4x)
+5000   1.30 / 1.33 (p99 1.65)        17.5                   13.2x (CPU 12.4x)
 =====  ============================  =====================  ===========================
 
-The means at N = 1000 are carried by preemption by other jobs (p99 0.57-4.3 ms, the
-scheduler's time slice); the thread-CPU median is 0.22-0.26 ms, the uncontended minimum
-~0.18 ms.
-Deepest overlap in the jam: 0.12 mm (N=100), 0.17 mm (N=1000), 0.39 mm (N=5000), slop 0.1 mm.
+The jam is at rest, every part touching its neighbours (2.5 contacts per part at N = 1000, 2.9 at
+N = 5000). Deepest overlap in the jam at the end: 0.10 mm (N=1000), 0.72 mm (N=5000, still
+falling from 1.5 mm while the last parts arrived), slop 0.1 mm.
 Largest step, N = 100, 0.3 s: impulse 1e-3 s (2e-3 s overlaps 2.3 mm; impact exact);
 penalty at k = 1e5 N/m picked by activity (springs/least active physical element = 0.0046):
 stable 2e-4 s, accurate 2e-4 s (impact error 8.9 %; 5e-4 s: 500 %), 5x; penalty at the
