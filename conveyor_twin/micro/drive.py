@@ -84,11 +84,15 @@ def surface_velocity(belts, speed, px, py, floor_mu):
 
 
 @njit(cache=True)
-def belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, speed, mp, acc):
+def belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, speed, mp, acc, heat):
     """Apply one substep of surface friction to parts 0..n-1 (velocities in place).
 
     :param speed: float64[B] actual belt speeds [m/s]. :param mp: model parameters.
     :param acc: activities; the belt's gets ``|F . slip| dt`` when tracking.
+    :param heat: float64[capacity] (output): the energy each part's surface friction dissipated
+        in the substep [J], ``J . (u - v) - |J|^2 / (2 m)`` for the friction impulse ``J``, the
+        surface velocity ``u`` and the part's velocity ``v`` before it (and the same for the
+        spin): the work the surface did on the part less its gain of kinetic energy, >= 0.
     """
     g_dt = mp[MP_GRAVITY] * mp[MP_DT]
     floor_mu = mp[MP_FLOOR_MU]
@@ -111,22 +115,21 @@ def belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, speed, mp, acc):
         if d <= limit:
             vx[i] = bvx
             vy[i] = bvy
-            if track:
-                # slip falls from d to 0: mean slip d / 2 under the impulse m d
-                acc[A_BELT] += 0.5 * pt[t, PT_MASS] * d * d
+            # slip falls from d to 0: mean slip d / 2 under the impulse m d
+            q = 0.5 * pt[t, PT_MASS] * d * d
         else:
             f = limit / d
             vx[i] += dvx * f
             vy[i] += dvy * f
-            if track:
-                acc[A_BELT] += pt[t, PT_MASS] * limit * (d - 0.5 * limit)
+            q = pt[t, PT_MASS] * limit * (d - 0.5 * limit)
         w_limit = limit * pt[t, PT_MASS] * pt[t, PT_SPIN_ARM] * pt[t, PT_INV_INERTIA]
         w = wz[i]
         if abs(w) <= w_limit:
             wz[i] = 0.0
-            if track:
-                acc[A_BELT] += 0.5 * w * w / pt[t, PT_INV_INERTIA]
+            q += 0.5 * w * w / pt[t, PT_INV_INERTIA]
         else:
             wz[i] = w - w_limit if w > 0.0 else w + w_limit
-            if track:
-                acc[A_BELT] += (w_limit / pt[t, PT_INV_INERTIA]) * (abs(w) - 0.5 * w_limit)
+            q += (w_limit / pt[t, PT_INV_INERTIA]) * (abs(w) - 0.5 * w_limit)
+        heat[i] = q
+        if track:
+            acc[A_BELT] += q

@@ -134,6 +134,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
     fy = W[1]
     tz = W[2]
     ke = W[3]
+    heat = W[4]
     na = apar.shape[0]
     passes = int(cfg[CF_PASSES])
     position_passes = int(cfg[CF_POSITION_PASSES])
@@ -176,7 +177,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                     t = ptype[i]
                     ke[i] = 0.5 * ((vx[i] * vx[i] + vy[i] * vy[i]) / pt[t, PT_INV_MASS]
                                    + wz[i] * wz[i] / pt[t, PT_INV_INERTIA])
-            belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, belt_v[BV_SPEED], mp, acc)
+            belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, belt_v[BV_SPEED], mp, acc, heat)
             if mode == MODE_PENALTY:
                 for i in range(n):
                     fx[i] = 0.0
@@ -203,8 +204,8 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                     tz[i] = wz[i]
                 prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, fx, fy, tz, prev)
                 solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev)
-                limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, fx, fy, tz, pt, prev, island,
-                             island_sums)
+                limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, fx, fy, tz, pt, prev, heat,
+                             island, island_sums)
             for i in range(n):
                 if impulse:
                     fx[i] = x[i]      # positions at detection, for correct_positions

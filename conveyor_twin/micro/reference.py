@@ -160,7 +160,8 @@ def impulse_ref(va, wa, ma_inv, ia_inv, ra, vb, wb, mb_inv, ib_inv, rb, n, e, mu
 
 
 def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np.ndarray,
-               i_inv: np.ndarray, passes: int) -> List[Tuple[float, float]]:
+               i_inv: np.ndarray, passes: int,
+               heat: Optional[np.ndarray] = None) -> List[Tuple[float, float]]:
     """Apply the impulses of :func:`conveyor_twin.micro.contacts.response.prepare_contacts`,
     :func:`~conveyor_twin.micro.contacts.response.solve_impulses` and
     :func:`~conveyor_twin.micro.contacts.response.limit_energy`; return the accumulated
@@ -169,6 +170,8 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
     :param contacts: dicts with ``a``, ``b`` (-1: fixed), ``n``, ``ra``, ``rb``, ``e``,
         ``mu_s``, ``mu_k``, ``v_t``, ``bv``, ``bw`` and the warm start ``ln``, ``lt`` (the
         previous substep's impulses, 0 for a new contact). :param v: (n, 2) velocities, in place.
+    :param heat: (n,) what surface friction dissipated on each part in the substep [J] (the
+        external work an island may turn into kinetic energy; zeros if None).
     """
     v0, w0 = v.copy(), w.copy()
 
@@ -227,8 +230,8 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
             jt = min(max(jt, min(0.0, 2 * dt)), max(0.0, 2 * dt))
             apply(c, jt * t)
             acc[k] = [ln1, lt + jt]
-    # no rise of the kinetic energy of any island (parts joined by contacts) beyond the work
-    # of moving kinematic bodies
+    # no rise of the kinetic energy of any island (parts joined by contacts) beyond the heat of
+    # the surface friction and the work of moving kinematic bodies
     island = list(range(len(v)))
 
     def root(i):
@@ -248,7 +251,7 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
         k = roots == r
         g = float(np.sum(m[k, None] * v0[k] * dv[k]) + np.sum(inertia[k] * w0[k] * dw[k]))
         q = 0.5 * float(np.sum(m[k, None] * dv[k] ** 2) + np.sum(inertia[k] * dw[k] ** 2))
-        work = 0.0
+        work = 0.0 if heat is None else float(np.sum(heat[k]))
         for (ln, lt), c in zip(acc, contacts):
             if c['b'] < 0 and roots[c['a']] == r:
                 n = np.asarray(c['n'], dtype=float)

@@ -184,7 +184,7 @@ class MicroSim:
         self._cell_table = grid_table(self.grid.cells)
         self._cell_items = np.zeros(cap, dtype=np.int64)
         self._part_cell = np.zeros(cap, dtype=np.int64)
-        self._W = np.zeros((4, cap))
+        self._W = np.zeros((5, cap))
         (self._cand, self._va, self._vb, self._out, self._ct, self._cidx, self._prev,
          self._island, self._island_sums) = scratch(cap)
         self._nbr, self._pos0 = neighbour_arrays(cap)

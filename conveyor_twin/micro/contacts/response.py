@@ -19,9 +19,9 @@ its partner, at the same point); no increment adds kinetic energy (a normal incr
 reverses the current approach, down to the bounce; a tangential one at most reverses the current
 sliding). The warm start can (a stale impulse pushing apart bodies that no longer press on each
 other), so :func:`limit_energy` scales the substep's impulses of each island (parts joined by
-contacts), if needed, so its parts' kinetic energy does not rise by more than the moving
-actuators' work; in a held jam it changes nothing. Penetration beyond the slop is removed by moving positions only
-(:func:`correct_positions`, :data:`~conveyor_twin.micro.sim.POSITION_PASSES` sweeps, inverse-mass
+contacts), if needed, so its parts' kinetic energy does not rise by more than the external work
+on them (belt friction, moving actuators). Penetration beyond the slop is removed by moving
+positions only (:func:`correct_positions`, :data:`~conveyor_twin.micro.sim.POSITION_PASSES` sweeps, inverse-mass
 proportion along ``n``): it never feeds into velocities, so it adds no energy and no momentum (the
 centre of mass stays; the angular momentum about a fixed point changes by ``m dx x v`` where
 bodies slide past each other while they overlap).
@@ -394,9 +394,17 @@ def _root(parent, i):
 
 
 @njit(cache=True)
-def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev, parent, acc3):
+def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev, heat, parent,
+                 acc3):
     """Scale each island's contact impulses of the substep so its parts' kinetic energy does
-    not rise by more than the work of the moving actuators on them.
+    not rise by more than the external work done on them in the substep.
+
+    The bound is the first law for the island: kinetic energy rises by at most the work of the
+    surroundings (dissipation >= 0). External work: the belts' and the floor's surface friction
+    (``heat``: what it dissipated in this substep beyond the kinetic energy it gave, from
+    :func:`~conveyor_twin.micro.drive.belt_drive`; ``v0x`` etc. are the velocities after it)
+    and the moving actuators. Without either (a belt at rest under parts at rest, walls only)
+    the island's kinetic energy never rises.
 
     An island is a set of parts joined by contacts (fixed and kinematic bodies join nothing);
     islands do not exchange impulses, so each is limited alone and a jam does not touch parts
@@ -406,19 +414,18 @@ def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev, par
     ``q = sum (m dv^2 + I dw^2) / 2``). A kinematic body moving at ``u`` at a contact does the
     work ``s W``, ``W = sum J . u`` over its contacts' impulses ``J`` on the parts (a contact
     that does not add energy in the body's frame adds at most that in ours; fixed bodies:
-    ``u = 0``). If ``g + q > W`` (a warm start pushed apart bodies that no longer press on each
-    other, or friction let go of what it held) the largest ``s`` that keeps the balance is
-    taken, ``(W - g) / q`` (0 if that is negative), and the island's impulses kept for the next
-    warm start are scaled alike. Every impulse keeps its partner, so momentum stays; in a jam
-    held against the belt the impulses take back what the belt added (``g ~ -2 q``), and
-    nothing changes.
+    ``u = 0``). If ``g + q > W + H`` (``H`` the island's heat; a warm start pushed apart bodies
+    that no longer press on each other, or friction let go of what it held) ``s`` is taken as
+    ``(W + H - g) / q`` (0 if that is negative), which keeps ``s g + s^2 q <= s W + H``, and
+    the island's impulses kept for the next warm start are scaled alike. Every impulse keeps
+    its partner, so momentum stays.
 
     :param parent: int64[capacity] scratch (the islands); ``acc3``: (3, capacity) scratch.
     :return: number of islands scaled.
     """
-    # the work of the moving actuators, per part
+    # the external work, per part: the heat of the surface friction and the moving actuators'
     for i in range(n):
-        acc3[2, i] = 0.0
+        acc3[2, i] = heat[i]
     c = nc - 1
     while c >= 0 and cidx[c, 1] < 0:      # contacts with fixed and kinematic bodies come last
         bw = ct[c, CT_BW]
