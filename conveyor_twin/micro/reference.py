@@ -215,8 +215,14 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
         lt = min(max(c['lt'], -c['mu_s'] * ln), c['mu_s'] * ln)
         apply(c, ln * n + lt * t)
         acc.append([ln, lt])
+    # the sweep order: the part-part contacts' two halves alternating, then the others
+    pairs = sum(1 for c in contacts if c['b'] >= 0)
+    half = (pairs + 1) // 2
+    order = [i for k in range(half) for i in (k, half + k) if i < pairs]
+    order += list(range(pairs, len(contacts)))
     for _ in range(passes):
-        for k, c in enumerate(contacts):
+        for k in order:
+            c = contacts[k]
             n = np.asarray(c['n'], dtype=float)
             t = np.array([-n[1], n[0]])
             un = relative(c) @ n
