@@ -55,7 +55,7 @@ PENALTY_OMEGA_DT = 0.5
 # impacts and matter where contacts share bodies, as in a jam.
 CONTACT_PASSES = 2
 # Impulse model: sweeps of the penetration correction per substep.
-POSITION_PASSES = 2
+POSITION_PASSES = 1
 # Neighbour list skin as a fraction of the smallest part radius: a part may move 0.49 of it
 # before the list is rebuilt (in a jam it lives for many steps; in free flow at 0.5 m/s with
 # 10 mm discs and 1 ms steps it is rebuilt every fourth step). 0.8 against 0.4: the 1000-disc
