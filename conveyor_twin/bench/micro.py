@@ -34,19 +34,19 @@ k = 1e5 N/m both criteria give 2e-4 s (5x): the activity-sized spring, far softe
 is what makes penalty contacts affordable.
 
 Measured on the shared 2-core machine (numba 0.68, pymunk 7.3.1, 2000 warm-up + 2000 timed
-steps, load average ~1-2; wall clock; pymunk's ``space.step`` alone):
+steps, load average ~2-4; wall clock; pymunk's ``space.step`` alone):
 
 =====  ============================  =====================  ===========================
 N      ours median / mean [ms]       pymunk step mean       pymunk / ours
 =====  ============================  =====================  ===========================
-1000   0.244 / 0.254 (p99 0.34)      1.73                   6.8x (CPU 6.4x)
-5000   1.30 / 1.33 (p99 1.65)        17.5                   13.2x (CPU 12.4x)
+1000   0.168 / 0.189 (p99 0.29)      2.37                   12.5x (CPU 8.7x)
+5000   0.971 / 1.31 (p99 5.5)        20.0                   15.2x (CPU 18.6x)
 =====  ============================  =====================  ===========================
 
 The jam is at rest, every part touching its neighbours (2.5 contacts per part at N = 1000, 2.9 at
-N = 5000). Deepest overlap in the jam at the end: 0.10 mm (N=1000), 0.72 mm (N=5000, still
-falling from 1.5 mm while the last parts arrived), slop 0.1 mm.
-Largest step, N = 100, 0.3 s: impulse 5e-4 s (1e-3 s overlaps 0.54 mm, 2e-3 s 1.6 mm; impact
+N = 5000). Deepest overlap in the jam at the end: 0.10 mm (N=1000), 0.14 mm (N=5000), slop
+0.1 mm (at most 0.23 mm in the timed jam; 0.8 mm at 0.5 s while the jam forms).
+Largest step, N = 100, 0.3 s: impulse 5e-4 s (1e-3 s overlaps 0.52 mm, 2e-3 s 1.8 mm; impact
 exact);
 penalty at k = 1e5 N/m picked by activity (springs/least active physical element = 0.0046):
 stable 2e-4 s, accurate 2e-4 s (impact error 8.9 %; 5e-4 s: 500 %), 5x; penalty at the

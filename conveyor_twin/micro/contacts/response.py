@@ -32,11 +32,10 @@ time-deterministic), but momentum-conserving sweeps without memory do not hold a
 benchmark jam (``conveyor-twin bench micro`` scene, 10 mm discs, 3 s) two such sweeps let the
 discs overlap by 9.6 mm (N = 1000) and 10 mm (N = 5000), i.e. parts pass through each other under
 the belt's push, because a sweep carries an impulse only a contact or two further. With the warm
-start and the same two sweeps the jam comes to rest (velocities of 1e-4 m/s and less while the
-belt runs under it); the deepest overlap, checked every 0.25 s over 4 s, peaks at 0.39 mm
-(N = 1000) and 1.5 mm (N = 5000: while the last parts arrive, the energy limit scales the
-jam's impulses a few dozen times) and falls to 0.11 and 0.9 mm by 4 s, as the penetration
-correction pushes the parts back out.
+start and the same two sweeps the jam comes to rest (velocities of 1e-3 m/s and less while the
+belt runs under it); the deepest overlap, checked every 0.25 s over 6 s, peaks at 0.31 mm
+(N = 1000) and 0.8 mm (N = 5000, at 0.5 s, while the front of the jam forms), is at most
+0.12 mm and 0.34 mm from 0.75 s on and falls to 0.10 and 0.14 mm by 6 s.
 
 Penalty model: a spring-damper per contact point, ``f_n = max(0, k d - c u_n)``, and a Coulomb
 friction force ``min(mu f_n, |u_t| / (k_t dt))`` against the sliding (the second term stops it
