@@ -54,7 +54,9 @@ PENALTY_OMEGA_DT = 0.5
 # impulses (see the docstring of contacts.response); further sweeps change nothing for isolated
 # impacts and matter where contacts share bodies, as in a jam.
 CONTACT_PASSES = 2
-# Impulse model: sweeps of the penetration correction per substep.
+# Impulse model: sweeps of the penetration correction per substep (one keeps the benchmark jam's
+# overlaps within 0.34 mm of 10 mm discs once formed; a second costs as much as a tenth of the
+# step at N = 5000 and changes little).
 POSITION_PASSES = 1
 # Neighbour list skin as a fraction of the smallest part radius: a part may move 0.49 of it
 # before the list is rebuilt (in a jam it lives for many steps; in free flow at 0.5 m/s with
