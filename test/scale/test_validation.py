@@ -28,8 +28,8 @@ pytestmark = pytest.mark.slow
 SEEDS = tuple(range(1, 9))
 # Collision-operator speed [m/s] of the default cell: the Goettlich model's one free parameter,
 # chosen so the macro jam queues and discharges as the micro one (seeds 1..8 in
-# docs/validation.md: queue mean +0.1 %, peak +0.7 %, mean exit time +0.1 %).
-DEFLECTOR_EPSILON = 1.6
+# docs/validation.md: queue mean +1.2 %, peak +1.3 %, mean exit time +0.2 %).
+DEFLECTOR_EPSILON = 1.4
 
 
 def _ensemble(policy: str, quantity) -> float:
