@@ -66,7 +66,10 @@ def test_sub_physical_perturbations_keep_the_upstream_window_and_scramble_the_do
         a, b = barrier_edges(run, INFEED), barrier_edges(ref, INFEED)
         assert [k for k, _ in a] == [k for k, _ in b]
         assert max(abs(ta - tb) for (_, ta), (_, tb) in zip(a, b)) <= 10  # ns
-        assert run['counts'][AFTER_DEFLECTOR] != ref['counts'][AFTER_DEFLECTOR]
+        # behind the jam: other edges (another count, or the same count at times apart by
+        # more than a step)
+        a, b = barrier_edges(run, AFTER_DEFLECTOR), barrier_edges(ref, AFTER_DEFLECTOR)
+        assert len(a) != len(b) or max(abs(ta - tb) for (_, ta), (_, tb) in zip(a, b)) > 1e6
 
 
 def test_no_density_reaches_a_sensor_window() -> None:
