@@ -21,10 +21,10 @@ sliding). The warm start can (a stale impulse pushing apart bodies that no longe
 other), so :func:`limit_energy` scales the substep's impulses of each island (parts joined by
 contacts), if needed, so its parts' kinetic energy does not rise by more than the external work
 on them (belt friction, moving actuators). Penetration beyond the slop is removed by moving
-positions only (:func:`correct_positions`, :data:`~conveyor_twin.micro.sim.POSITION_PASSES` sweeps, inverse-mass
-proportion along ``n``): it never feeds into velocities, so it adds no energy and no momentum (the
-centre of mass stays; the angular momentum about a fixed point changes by ``m dx x v`` where
-bodies slide past each other while they overlap).
+positions only (:func:`correct_positions`, :data:`~conveyor_twin.micro.sim.POSITION_PASSES`
+sweeps, inverse-mass proportion along ``n``): it never feeds into velocities, so it adds no
+energy and no momentum (the centre of mass stays; the angular momentum about a fixed point
+changes by ``m dx x v`` where bodies slide past each other while they overlap).
 
 Why warm starting, although Hoher et al. solve each contact once: every contact is still solved
 a fixed number of times per substep (no iteration to a tolerance, so cost and result stay
@@ -313,9 +313,9 @@ def _sweep_contact(k, pairs, half):
 
 @njit(cache=True)
 def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
-    """Apply the contacts' impulses in ``passes`` sweeps (canonical order) after the warm start
-    of :func:`prepare_contacts`; keep the keys and accumulated impulses in ``prev`` for the
-    next substep.
+    """Apply the contacts' impulses in ``passes`` sweeps (the order of :func:`_sweep_contact`)
+    after the warm start of :func:`prepare_contacts`; keep the keys and accumulated impulses in
+    ``prev`` for the next substep.
 
     Sequential impulses with accumulated impulses (Catto): every impulse acts on both bodies of
     its contact, equal and opposite, at the contact point (the same point for both, so the
