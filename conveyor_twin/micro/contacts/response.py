@@ -423,6 +423,20 @@ def _root(parent, i):
     return i
 
 
+@njit(cache=True, inline='always')
+def _energy_change(i, ptype, pt, vx, vy, wz, v0x, v0y, w0):
+    """Return part ``i``'s kinetic energy change from ``v0`` to ``v`` as ``(g, q)`` [J]:
+    ``g = m v0 . dv + I w0 dw`` (linear in the change), ``q = (m dv^2 + I dw^2) / 2``."""
+    t = ptype[i]
+    dx = vx[i] - v0x[i]
+    dy = vy[i] - v0y[i]
+    dw = wz[i] - w0[i]
+    mi = pt[t, PT_MASS]
+    ii = pt[t, PT_INERTIA]
+    return (mi * (v0x[i] * dx + v0y[i] * dy) + ii * w0[i] * dw,
+            0.5 * (mi * (dx * dx + dy * dy) + ii * dw * dw))
+
+
 @njit(cache=True)
 def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev, heat, parent,
                  acc3):
@@ -471,15 +485,8 @@ def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev, hea
     # each part's energy change less that work: if none is positive, no island's sum is
     rising = False
     for i in range(n):
-        t = ptype[i]
-        dx = vx[i] - v0x[i]
-        dy = vy[i] - v0y[i]
-        dw = wz[i] - w0[i]
-        mi = pt[t, PT_MASS]
-        ii = pt[t, PT_INERTIA]
-        e = (mi * ((v0x[i] + 0.5 * dx) * dx + (v0y[i] + 0.5 * dy) * dy)
-             + ii * (w0[i] + 0.5 * dw) * dw)
-        if e > acc3[2, i]:
+        g, q = _energy_change(i, ptype, pt, vx, vy, wz, v0x, v0y, w0)
+        if g + q > acc3[2, i]:
             rising = True
             break
     if not rising:
@@ -501,16 +508,11 @@ def limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, v0x, v0y, w0, pt, prev, hea
                     parent[ra] = rb
     # sums per island, on its representative (the work was summed per part above)
     for i in range(n):
-        t = ptype[i]
-        dx = vx[i] - v0x[i]
-        dy = vy[i] - v0y[i]
-        dw = wz[i] - w0[i]
-        mi = pt[t, PT_MASS]
-        ii = pt[t, PT_INERTIA]
+        g, q = _energy_change(i, ptype, pt, vx, vy, wz, v0x, v0y, w0)
         r = _root(parent, i)
         parent[i] = r
-        acc3[0, r] += mi * (v0x[i] * dx + v0y[i] * dy) + ii * w0[i] * dw
-        acc3[1, r] += 0.5 * (mi * (dx * dx + dy * dy) + ii * dw * dw)
+        acc3[0, r] += g
+        acc3[1, r] += q
         if r != i:
             acc3[2, r] += acc3[2, i]
             acc3[2, i] = 0.0
