@@ -65,6 +65,29 @@ CONTRACT_MSGS: Dict[str, List[Tuple[str, str]]] = {
         ('cleared_reason', 'string[]'), ('total_injected', 'uint32'),
         ('total_rejected', 'uint32'),
     ],
+    # the plant's link and progress messages (docs/plant.md), beyond architecture.md's list
+    'PartTransfer': [
+        ('header', 'std_msgs/Header'), ('link', 'string'), ('through', 'uint64'),
+        ('first_seq', 'uint64'), ('held_from', 'uint64'), ('run', 'uint64'),
+        ('step_left', 'uint64[]'), ('id', 'uint32[]'), ('origin_id', 'uint32[]'),
+        ('part_type', 'uint16[]'), ('x', 'float64[]'), ('y', 'float64[]'), ('yaw', 'float64[]'),
+        ('vx', 'float64[]'), ('vy', 'float64[]'), ('wz', 'float64[]'),
+    ],
+    'TransferAccepted': [
+        ('header', 'std_msgs/Header'), ('link', 'string'), ('through', 'uint64'),
+        ('run', 'uint64'), ('starting', 'bool'), ('exit_run', 'uint64'),
+        ('exit_run_known', 'bool'), ('seq', 'uint64[]'), ('step', 'uint64[]'),
+    ],
+    'CellProgress': [
+        ('header', 'std_msgs/Header'), ('cell', 'string'), ('step', 'uint64'),
+        ('end_step', 'uint64'), ('done', 'bool'), ('run', 'uint64'), ('entered', 'float64'),
+        ('in_cell', 'float64'), ('left', 'float64'), ('vanished', 'float64'),
+        ('exit_link', 'string[]'), ('exit_sent', 'uint64[]'), ('exit_accepted', 'uint64[]'),
+        ('exit_resent', 'uint64[]'), ('entry_link', 'string[]'), ('entry_inserted', 'uint64[]'),
+        ('entry_waiting', 'uint64[]'), ('entry_earlier', 'uint64[]'),
+        ('entry_dropped', 'uint64[]'), ('step_time_mean_ms', 'float64'),
+        ('real_time_factor', 'float64'), ('state_hash', 'string'),
+    ],
 }
 CONTRACT_SRVS: Dict[str, Tuple[List[Tuple[str, str]], List[Tuple[str, str]]]] = {
     'Step': (
