@@ -18,13 +18,14 @@ the next id of its new cell, and the link carries the id it had upstream and its
 """
 
 import hashlib
-from typing import Dict, List, Optional
+import math
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
 from conveyor_twin.coord.assembly import AssembledTwin, build_twin
 from conveyor_twin.micro.state import C_NEXT_ID, C_REGION_LEFT, C_REMOVED, PT_BRAD
-from conveyor_twin.plant.geometry import entry_pose, inside, to_link
+from conveyor_twin.plant.geometry import entry_pose, mark_inside, to_link
 from conveyor_twin.plant.link import LinkEntry, LinkExit, Transit
 from conveyor_twin.plant.model import ID_RANGE, Plant, PlantCell
 from conveyor_twin.plant.sync import horizon
@@ -59,6 +60,10 @@ class PlantCellCore:
         self.exits: List[LinkExit] = [LinkExit(k, run) for k in plant.links_from(name)]
         self.entries: List[LinkEntry] = [LinkEntry(k, run) for k in plant.links_to(name)]
         self._radius = sim.pt[:, PT_BRAD].copy()  # bounding radius per part type [m]
+        # the exits' rectangles as mark_inside takes them, and its mask
+        self._exit_rects = [(f.x, f.y, math.cos(f.yaw), math.sin(f.yaw), f.x0, f.x1,
+                             f.half_width) for f in (x.link.exit for x in self.exits)]
+        self._mark = np.zeros(sim.state.P.shape[1], dtype=np.bool_)
         self._origin: Dict[int, int] = {}
         self._digest = hashlib.sha256()
         #: Parts due and waiting at the entries after the last step, per entry.
@@ -107,29 +112,23 @@ class PlantCellCore:
             else:
                 self.waiting[k] = 0
         self.twin.step(1)
-        for x in self.exits:
-            self._take(x, s)
+        for x, rect in zip(self.exits, self._exit_rects):
+            self._take(x, rect, s)
         for end in self.entries:
             end.through = s
         for end in self.exits:
             end.through = s
 
-    def _take(self, x: LinkExit, s: int) -> None:
+    def _take(self, x: LinkExit, rect: Tuple[float, ...], s: int) -> None:
+        """Move the parts in exit ``x``'s rectangle (at most its room) into its link."""
         sim = self.twin.micro.sim
         n = sim.n
         if not n:
             return
         st = sim.state
-        mask = inside(x.link.exit, st.P[0, :n], st.P[1, :n])
-        if not mask.any():
+        if not mark_inside(*rect, st.P[0], st.P[1], n, x.room(s), self._mark):
             return
-        room = x.room(s)
-        if room <= 0:
-            return
-        if room < n:
-            idx = np.flatnonzero(mask)
-            if idx.size > room:
-                mask[idx[room:]] = False
+        mask = self._mark[:n]
         view = sim.remove(mask=mask)
         k = len(view.id)
         st.counters[C_REMOVED] -= k      # handed over to the link, not removed

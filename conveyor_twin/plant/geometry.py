@@ -11,6 +11,7 @@ import math
 from typing import Tuple
 
 import numpy as np
+from numba import njit
 
 from conveyor_twin.cell.model import Belt, Cell, Rect
 from conveyor_twin.plant.model import EndFrame, LinkEnd
@@ -77,13 +78,22 @@ def _wrap(a: float) -> float:
     return math.atan2(math.sin(a), math.cos(a))
 
 
-def inside(f: EndFrame, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Return a bool mask of the points (x, y) [m] inside the end's rectangle."""
-    c, s = math.cos(f.yaw), math.sin(f.yaw)
-    dx, dy = x - f.x, y - f.y
-    u = c * dx + s * dy
-    v = -s * dx + c * dy
-    return (u >= f.x0) & (u <= f.x1) & (np.abs(v) <= f.half_width)
+@njit(cache=True)
+def mark_inside(ox, oy, c, s, x0, x1, half_width, x, y, n, room, mark):
+    """Mark in ``mark[:n]`` the first ``room`` of the points (x, y) [m] inside a link end's
+    rectangle (frame origin (ox, oy) [m], yaw with cosine ``c`` and sine ``s``; x in [x0, x1],
+    |y| <= half_width [m]), in order; return how many were marked."""
+    k = 0
+    for i in range(n):
+        dx = x[i] - ox
+        dy = y[i] - oy
+        u = c * dx + s * dy
+        v = -s * dx + c * dy
+        hit = k < room and x0 <= u <= x1 and abs(v) <= half_width
+        mark[i] = hit
+        if hit:
+            k += 1
+    return k
 
 
 def to_link(f: EndFrame, x: np.ndarray, y: np.ndarray, yaw: np.ndarray, vx: np.ndarray,
