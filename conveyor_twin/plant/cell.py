@@ -68,6 +68,8 @@ class PlantCellCore:
         self._digest = hashlib.sha256()
         #: Parts due and waiting at the entries after the last step, per entry.
         self.waiting = [0] * len(self.entries)
+        #: The run has completed its last step (:meth:`finish`).
+        self.finished = False
 
     @property
     def step_index(self) -> int:
@@ -86,11 +88,26 @@ class PlantCellCore:
         """True if the next step may be computed with what the neighbours reported."""
         return self.step_index + 1 <= self.horizon()
 
+    def finish(self) -> None:
+        """Mark the run complete: the entries' next batches say ``final`` (nothing more will be
+        inserted), which is what the upstream cells wait for before their last report."""
+        self.finished = True
+        for e in self.entries:
+            e.finished = True
+
+    def settled(self) -> bool:
+        """True once every exit heard its entry cell's final batch: the counts of this cell's
+        links then agree with the downstream cells' last counts."""
+        return all(x.peer_final for x in self.exits)
+
     def step(self) -> None:
         """Compute the next step: entries, physics, exits (see the module docstring).
 
-        :raises RuntimeError: if the neighbours have not reported far enough.
+        :raises RuntimeError: if the neighbours have not reported far enough, or the run
+            is finished.
         """
+        if self.finished:
+            raise RuntimeError(f'cell {self.name!r} finished its run at step {self.step_index}')
         s = self.step_index + 1
         if s > self.horizon():
             raise RuntimeError(f'cell {self.name!r} may not compute step {s} yet '

@@ -3,8 +3,9 @@
 Built from what each cell reports (:meth:`~conveyor_twin.plant.cell.PlantCellCore.counts`) and,
 per link, from its exit (parts sent and not reported inserted: in transit, waiting at a
 blocked entry, or held for an entry cell that is not running). Reports from cells that run in
-processes of their own may be from different steps; the ledger balances exactly for reports
-from the same step (lockstep, or at the end of a run) and says by how much it does not.
+processes of their own may be from different steps; the ledger balances exactly for their
+final reports (each cell's ``done`` report comes after its exits heard their entries' final
+batches) and says by how much it does not.
 """
 
 from dataclasses import dataclass, field

@@ -67,7 +67,8 @@ class Acceptances:
     another), and whether the entry still waits for the exit's oldest held part
     (``starting``: the exit then sends every part it holds). ``exit_run``: the run of the
     exit cell whose parts the entry takes (None: none yet); ``seq`` numbers its parts, and
-    ``through`` and ``step`` count in its steps."""
+    ``through`` and ``step`` count in its steps. ``final``: the entry cell's run has completed
+    its last step, and this batch and the ones before it report every part it inserted."""
 
     link: str
     through: int
@@ -76,6 +77,7 @@ class Acceptances:
     step: List[int] = field(default_factory=list)
     starting: bool = False
     exit_run: Optional[int] = None
+    final: bool = False
 
 
 class LinkExit:
@@ -104,6 +106,8 @@ class LinkExit:
         self.accepted = 0
         #: Parts re-sent to a restarted entry cell.
         self.resent = 0
+        #: The entry's current run has completed its last step and reported every insertion.
+        self.peer_final = False
 
     @property
     def in_link(self) -> int:
@@ -168,6 +172,7 @@ class LinkExit:
                                                        else self.sent):
             self._send_held()
         self.peer_run = batch.run
+        self.peer_final = batch.final
         for seq, step in zip(batch.seq, batch.step):
             if not self.held or self.held[0].seq != seq:
                 continue  # a duplicate report
@@ -214,6 +219,8 @@ class LinkEntry:
         self._ended_runs: Set[int] = set()
         self._seq: List[int] = []
         self._step: List[int] = []
+        #: This cell's run has completed its last step (reported as ``final``).
+        self.finished = False
 
     def _follow(self, run: int) -> None:
         """Drop what is left of the exit cell's current run and follow ``run``."""
@@ -289,7 +296,8 @@ class LinkEntry:
         off = self.offset
         out = Acceptances(self.link.name, self.through - off, self.run, self._seq,
                           [s - off for s in self._step] if off else self._step,
-                          starting=self.expected is None, exit_run=self.peer_run)
+                          starting=self.expected is None, exit_run=self.peer_run,
+                          final=self.finished)
         self._seq, self._step = [], []
         return out
 

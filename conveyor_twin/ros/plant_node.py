@@ -6,10 +6,15 @@ process: with ``streams`` the cell's whole interface (a lockstep
 commands, faults, diagnostics) whose steps the plant drives. A stepping thread computes steps
 as far as the conservative rule allows (:mod:`conveyor_twin.plant.sync`), publishes the links'
 batches every sync period and whenever it has to wait, and waits for the neighbours' batches;
-executor callbacks hand incoming batches to the link ends. Topics (relative to the plant's
-namespace, :data:`~conveyor_twin.contract.PLANT`): ``links/<link>/transfer`` (the exit's
-:class:`~conveyor_twin.plant.link.Departures`), ``links/<link>/accepted`` (the entry's
-:class:`~conveyor_twin.plant.link.Acceptances`), ``progress`` (every cell's counts).
+executor callbacks hand incoming batches to the link ends. After its last step a cell sends
+its entries' final batches and reports ``done`` once every exit heard its entry cell's final
+batch (:meth:`PlantCellNode.settled`): the cells' done reports agree, and the ledger built from
+them balances exactly.
+
+Topics (relative to the plant's namespace, :data:`~conveyor_twin.contract.PLANT`):
+``links/<link>/transfer`` (the exit's :class:`~conveyor_twin.plant.link.Departures`),
+``links/<link>/accepted`` (the entry's :class:`~conveyor_twin.plant.link.Acceptances`),
+``progress`` (every cell's counts).
 
 :class:`ComposedPlant` runs every cell in this process with
 :class:`~conveyor_twin.plant.runner.PlantRunner` (batches handed over in memory) and publishes
@@ -47,6 +52,9 @@ CellProgress = message_class(contract.CELL_PROGRESS.type_name)
 WAIT_PERIOD = 0.05
 #: Shortest wall time between two ``progress`` reports of a cell (but the last) [s].
 PROGRESS_PERIOD = 0.2
+#: After its last step, a cell waits for the final batch of each exit's entry cell; an entry
+#: cell with no publisher on the link for this long is gone, and the link keeps its parts [s].
+PEER_GONE_AFTER = 3.0
 
 
 def sync_period(plant: Plant, mode: TimeMode) -> int:
@@ -128,6 +136,7 @@ def acceptances_msg(batch: Acceptances, time_ns: int) -> 'TransferAccepted':
     m.starting = batch.starting
     m.exit_run_known = batch.exit_run is not None
     m.exit_run = batch.exit_run if batch.exit_run is not None else 0
+    m.final = batch.final
     return m
 
 
@@ -135,7 +144,8 @@ def acceptances_of(m: 'TransferAccepted') -> Acceptances:
     """Return the batch of acceptances a ``TransferAccepted`` message carries."""
     return Acceptances(m.link, int(m.through), int(m.run), [int(s) for s in m.seq],
                        [int(s) for s in m.step], starting=bool(m.starting),
-                       exit_run=int(m.exit_run) if m.exit_run_known else None)
+                       exit_run=int(m.exit_run) if m.exit_run_known else None,
+                       final=bool(m.final))
 
 
 def progress_msg(core: PlantCellCore, *, end_step: int, done: bool, stats: StepStats,
@@ -181,8 +191,9 @@ def ledger_of(reports: Dict[str, 'CellProgress'],
       parts of ended runs (the rest the entry dropped, or never received).
 
     If that sum is negative for a cell (parts that entered a source cell after its last
-    report reached the next cell), it counts as entered instead. Exact for reports of the
-    same step and one restarted cell per link at a time.
+    report reached the next cell), it counts as entered instead. Exact for the cells' done
+    reports (settled: every exit heard its entry's final batch) and one restarted cell per
+    link at a time; while cells run, a link's counts may lag its entry cell's by a batch.
     """
     cells: Dict[str, Dict[str, float]] = {}
     reported: Dict[str, int] = {}      # per link: insertions of the current exit run's parts
@@ -269,6 +280,7 @@ class PlantCellNode:
         self.lock = threading.Lock()
         self._wake = threading.Event()
         self._stop = threading.Event()
+        #: Set once the run completed its end step and its exits settled, or on an error.
         self.done = threading.Event()
         self.error: Optional[BaseException] = None
         self.reports: Dict[str, 'CellProgress'] = {}
@@ -278,6 +290,9 @@ class PlantCellNode:
         self._dep_pub = {x.link.name: self.node.create_publisher(
             PartTransfer, contract.link_topic(contract.PART_TRANSFER, ns, x.link.name), qos)
             for x in self.core.exits}
+        self._acc_topic = {x.link.name: contract.link_topic(contract.TRANSFER_ACCEPTED, ns,
+                                                            x.link.name) for x in self.core.exits}
+        self._absent_since: Dict[str, float] = {}
         self._acc_pub = {e.link.name: self.node.create_publisher(
             TransferAccepted, contract.link_topic(contract.TRANSFER_ACCEPTED, ns, e.link.name),
             qos) for e in self.core.entries}
@@ -288,8 +303,7 @@ class PlantCellNode:
                 self._receiver(e.receive, departures_of), qos))
         for x in self.core.exits:
             self._subs.append(self.node.create_subscription(
-                TransferAccepted, contract.link_topic(contract.TRANSFER_ACCEPTED, ns,
-                                                      x.link.name),
+                TransferAccepted, self._acc_topic[x.link.name],
                 self._receiver(x.receive, acceptances_of), qos))
         progress_qos = to_rclpy(contract.CELL_PROGRESS.qos)
         self._progress_pub = self.node.create_publisher(CellProgress,
@@ -339,8 +353,46 @@ class PlantCellNode:
             self._publish(pub, msg)
 
     def report_done(self) -> None:
-        """Publish the batches and the final report again (for a late subscriber)."""
-        self._flush(done=self.done.is_set() and self.error is None)
+        """Publish the batches and the final report again (for a late subscriber; ``done``
+        only while the exits are settled: a restarted entry cell unsettles them)."""
+        self._flush(done=self.done.is_set() and self.error is None and self.settled())
+
+    def settled(self) -> bool:
+        """True once every exit heard its entry cell's final batch (then this cell's counts of
+        its links agree with the entry cells' last reports), or that cell has been gone for
+        :data:`PEER_GONE_AFTER` (no publisher on the link: the link keeps its parts)."""
+        now = time.monotonic()
+        settled = True
+        for x in self.core.exits:
+            name = x.link.name
+            if x.peer_final:
+                self._absent_since.pop(name, None)
+                continue
+            if self.node.count_publishers(self._acc_topic[name]) == 0:
+                since = self._absent_since.setdefault(name, now)
+                if now - since >= PEER_GONE_AFTER:
+                    self.node.get_logger().warning(
+                        f'link {name!r}: cell {x.link.target.cell!r} is gone; the link holds '
+                        f'{x.in_link} parts', once=True)
+                    continue
+            else:
+                self._absent_since.pop(name, None)
+            settled = False
+        return settled
+
+    def _settle(self) -> None:
+        """After the last step: send the entries' final batches and report until every exit
+        is settled (:meth:`settled`); the report that ends it is ``done``."""
+        with self.lock:
+            self.core.finish()
+        while not self._stop.is_set():
+            settled = self.settled()
+            self._flush(done=settled)
+            if settled:
+                self.done.set()
+                return
+            self._wake.wait(WAIT_PERIOD)
+            self._wake.clear()
 
     def _publish(self, pub, msg) -> None:
         """Publish, retrying while the middleware refuses (a keep-all history full of samples
@@ -402,9 +454,10 @@ class PlantCellNode:
                 self._wake.wait(WAIT_PERIOD)
                 self._wake.clear()
             self.wall_end = time.monotonic()
-            self._flush(done=core.step_index >= end)
             if core.step_index >= end:
-                self.done.set()
+                self._settle()
+            else:
+                self._flush()
         except BaseException as exc:  # reported by the caller, never swallowed
             self.error = exc
             self.node.get_logger().error(f'cell {core.name!r} stopped: {exc!r}')

@@ -454,6 +454,8 @@ _TRANSFERACCEPTED = (
     "uint64 exit_run         # the exit cell's run whose parts `seq` numbers and in whose steps\n"
     '                        # `through` and `step` count (see exit_run_known) [1]\n'
     'bool exit_run_known     # false: the entry has heard of no run of the exit cell yet\n'
+    "bool final              # the entry cell's run has completed its last step: it inserts\n"
+    '                        # nothing more, and `seq` has reported every insertion\n'
     'uint64[] seq            # number of each inserted part in the link, ascending [1]\n'
     'uint64[] step           # step in which it was inserted [1]\n'
 )
@@ -466,7 +468,8 @@ _CELLPROGRESS = (
     "string cell             # the cell's name in the plant file\n"
     'uint64 step             # steps completed [1]\n'
     'uint64 end_step         # the step the run ends at (0: no end) [1]\n'
-    'bool done               # the cell completed end_step\n'
+    'bool done               # the cell completed end_step, and every exit heard its entry\n'
+    "                        # cell's final insertions: the counts are the run's last\n"
     "uint64 run              # id of the cell's current run [1]\n"
     'float64 entered         # parts that entered through its sources and spawns [parts]\n'
     'float64 in_cell         # parts in the cell now (micro bodies and macro density) [parts]\n'

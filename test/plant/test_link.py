@@ -132,3 +132,26 @@ def test_an_entry_follows_a_restarted_exit_and_drops_what_the_old_run_left():
     new.receive(back)
     assert new.accepted == 1 and not new.held and new.peer_through == 3
     assert e.inserted == 2
+
+
+def test_an_exit_is_settled_by_its_entry_runs_final_batch_only():
+    x, e = LinkExit(link(2)), LinkEntry(link(2))
+    x.add(part(0, 1))
+    x.through = 1
+    e.receive(x.batch())
+    e.insert(3, lambda p: 1)
+    x.receive(e.batch())
+    assert not x.peer_final and x.accepted == 1
+    e.finished = True
+    last = e.batch()
+    assert last.final
+    x.receive(last)
+    assert x.peer_final
+    # a report about another run of this exit says nothing about this run
+    x.receive(Acceptances('ab', through=9, run=0, exit_run=7, final=False))
+    assert x.peer_final
+    # a restarted entry cell runs again: not settled until its own final batch
+    x.receive(Acceptances('ab', through=0, run=1, exit_run=0, starting=True))
+    assert not x.peer_final
+    x.receive(Acceptances('ab', through=5, run=1, exit_run=0, final=True))
+    assert x.peer_final

@@ -1,5 +1,6 @@
 """The plant in one process: the ledger balances every step, ids are unique plant-wide,
-reruns and both stepping orders give the same bits, a full link makes parts queue upstream."""
+reruns and both stepping orders give the same bits, a full link makes parts queue upstream,
+a finished cell settles its upstream neighbour and steps no more."""
 
 from pathlib import Path
 
@@ -73,3 +74,20 @@ def test_a_cell_never_steps_past_what_its_neighbours_allow(plant):
     with pytest.raises(RuntimeError, match='may not compute step 41'):
         for _ in range(41):
             first.step()
+
+
+def test_a_finished_cell_settles_its_upstream_neighbour_and_steps_no_more(plant):
+    runner = PlantRunner(plant)
+    runner.run_to(300)
+    feeder, first, second = (runner.by_name[n] for n in ('feeder', 'first', 'second'))
+    assert not (feeder.settled() or first.settled()) and second.settled()  # no exits
+    second.finish()
+    runner.exchange()
+    assert first.settled() and not feeder.settled()
+    first.finish()
+    runner.exchange()
+    assert feeder.settled()
+    with pytest.raises(RuntimeError, match="'second' finished its run at step 300"):
+        second.step()
+    ledger = runner.ledger()
+    assert ledger.residual == 0.0 and ledger.entered > 0

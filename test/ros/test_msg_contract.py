@@ -76,7 +76,7 @@ CONTRACT_MSGS: Dict[str, List[Tuple[str, str]]] = {
     'TransferAccepted': [
         ('header', 'std_msgs/Header'), ('link', 'string'), ('through', 'uint64'),
         ('run', 'uint64'), ('starting', 'bool'), ('exit_run', 'uint64'),
-        ('exit_run_known', 'bool'), ('seq', 'uint64[]'), ('step', 'uint64[]'),
+        ('exit_run_known', 'bool'), ('final', 'bool'), ('seq', 'uint64[]'), ('step', 'uint64[]'),
     ],
     'CellProgress': [
         ('header', 'std_msgs/Header'), ('cell', 'string'), ('step', 'uint64'),
