@@ -22,6 +22,7 @@ from conveyor_twin.coord.commands import ACTUATOR, BELT, Command, CommandBook
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.faults.actuation import ActuationFaults
 from conveyor_twin.faults.book import FaultBook
+from conveyor_twin.health import Health
 
 
 class Stage(Protocol):
@@ -57,6 +58,9 @@ class Twin:
         self.fault_watchers: List[Callable[[StepInput], None]] = []
         #: Called after every reset (a scenario arms itself again).
         self.reset_listeners: List[Callable[[], None]] = []
+        #: Failures of the background threads and processes that serve this twin
+        #: (:mod:`conveyor_twin.health`): reported once, ERROR in diagnostics, non-zero exit.
+        self.health = Health()
         self._load(cell, seed)
 
     def _load(self, cell: Cell, seed: int) -> None:
