@@ -3,9 +3,12 @@
 Shows the parts at their poses and sizes on the cell drawn to scale (from the recording's
 ``cell.yaml``), the macro density as a heat map, light barriers red while blocked, actuators
 at their position, and under it the light-barrier states and belt speeds against time. The
-speed-up sets how many simulated seconds pass per second of animation. GIF is written with
-Pillow; MP4 needs ffmpeg. Exit codes: 0 written, 1 the recording cannot be animated (nothing
-written), 2 bad options.
+speed-up sets how many simulated seconds pass per second of animation, exactly: a GIF's frame
+delays (whole 10 ms) alternate so that they add up to the simulated time / speed-up (70, 60,
+70 ms at 15 frames/s); a GIF plays at most 50 frames/s. GIF is written with Pillow; MP4 needs
+ffmpeg. The density has the colour map and scale of ``plot``'s density figure (0 to the
+cell's ρ_max); zero density is left transparent. Exit codes: 0 written, 1 the recording
+cannot be animated (nothing written), 2 bad options.
 """
 
 import argparse
@@ -49,8 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--end', type=float, default=None, help='last simulation time [s]')
     p.add_argument('--view', type=_view, default=None,
                    help='region to show, X0,X1 or X0,X1,Y0,Y1 [m] (default: the whole cell)')
-    p.add_argument('--width', type=_positive, default=10.0, help='figure width [in]')
-    p.add_argument('--dpi', type=int, default=80, help='resolution [dots per inch]')
+    p.add_argument('--width', type=_positive, default=None,
+                   help='figure width [in] (default: from the shape of the view, 8 to 13)')
+    p.add_argument('--dpi', type=int, default=90, help='resolution [dots per inch]')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     return p
 
@@ -58,11 +62,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of ``conveyor-twin animate``."""
     args = build_parser().parse_args(argv)
-    from conveyor_twin.viz.animation import (AnimationError, check_output, render,
+    from conveyor_twin.viz.animation import (AnimationError, check_fps, check_output, render,
                                              stderr_progress)
     from conveyor_twin.viz.frames import load_frames
     try:
-        check_output(args.output)
+        check_fps(check_output(args.output), args.fps)
     except AnimationError as exc:
         print(f'conveyor-twin animate: {exc}', file=sys.stderr)
         return 2

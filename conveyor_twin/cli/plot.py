@@ -17,6 +17,10 @@ Figures (each only when the recording has the topic):
 - ``belt_speeds.png``: commanded (dashed) and actual speed against time per belt;
 - ``actuators.png``: commanded and actual position against time per actuator.
 
+A figure without data (a cell without actuators, a recording without density) is not written;
+a line on stderr names it and says why. The trajectories are drawn over the recording's cell;
+the density uses the colour map and scale of ``animate`` (0 to the cell's ρ_max).
+
 Times are simulation time [s]. Exit codes: 0 figures written, 1 the cell or recording cannot be
 read.
 """
@@ -24,7 +28,7 @@ read.
 import argparse
 import os
 import sys
-from typing import List, Optional, Sequence
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -48,31 +52,51 @@ def _figure(*args, **kwargs):
     return plt.subplots(*args, **kwargs)
 
 
-def _save(fig, path: str) -> str:
+def _save(fig, path: str, *, crop: bool = False) -> str:
     from matplotlib import pyplot as plt
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, **(dict(bbox_inches='tight', pad_inches=0.1) if crop else {}))
     plt.close(fig)
     return path
 
 
 def plot_trajectories(parts: series_mod.PartSamples, ids: Sequence[int], out_dir: str,
-                      title: str) -> List[str]:
-    """Write the x-y and x-t trajectory figures; return their paths."""
+                      title: str, cell=None) -> List[str]:
+    """Write the x-y and x-t trajectory figures; return their paths.
+
+    :param cell: the recording's cell, drawn under the x-y paths (as ``plot CELL.yaml``
+        draws it, without the names), or None.
+    """
+    from conveyor_twin.viz import cell_drawing
     written = []
-    fig, ax = _figure(figsize=(10, 4))
+    if cell is not None:
+        limits = cell_drawing.view_limits(cell, margin=0.03)
+        fig, ax = _figure(figsize=cell_drawing.figure_size(limits, 10.0, min_height=3.5))
+        cell_drawing.draw_static(ax, cell, labels=False)
+        cell_drawing.draw_actuators(ax, cell, [a.initial_position for a in cell.actuators],
+                                    labels=False)
+        cell_drawing.draw_barriers(ax, cell, labels=False)
+    else:
+        fig, ax = _figure(figsize=(10, 4))
     stride = max(1, len(parts.x) // MAX_DOTS)
-    ax.plot(parts.x[::stride], parts.y[::stride], ',', color='0.75', label='all parts')
+    ax.plot(parts.x[::stride], parts.y[::stride], ',', color='0.45', label='all parts',
+            zorder=7)
     for pid in ids:
         sel = parts.id == pid
-        ax.plot(parts.x[sel], parts.y[sel], '-', lw=1.2, label=f'part {pid}')
-        ax.plot(parts.x[sel][:1], parts.y[sel][:1], 'o', ms=3, color=ax.lines[-1].get_color())
+        ax.plot(parts.x[sel], parts.y[sel], '-', lw=1.2, label=f'part {pid}', zorder=8)
+        ax.plot(parts.x[sel][:1], parts.y[sel][:1], 'o', ms=3, color=ax.lines[-1].get_color(),
+                zorder=8)
+    if cell is not None:
+        ax.set_xlim(limits[0], limits[1])
+        ax.set_ylim(limits[2], limits[3])
+        ax.set_aspect('equal')
+    else:
+        ax.set_aspect('equal', adjustable='datalim')
     ax.set_xlabel('x [m]')
     ax.set_ylabel('y [m]')
-    ax.set_aspect('equal', adjustable='datalim')
     ax.set_title(f'{title}: part trajectories (x-y)')
-    ax.legend(fontsize=7, loc='upper right', ncol=2)
+    ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     fig.tight_layout()
-    written.append(_save(fig, os.path.join(out_dir, 'trajectories_xy.png')))
+    written.append(_save(fig, os.path.join(out_dir, 'trajectories_xy.png'), crop=True))
 
     fig, ax = _figure(figsize=(10, 4))
     for pid in ids:
@@ -88,39 +112,60 @@ def plot_trajectories(parts: series_mod.PartSamples, ids: Sequence[int], out_dir
     return written
 
 
-def plot_density(density: dict, out_dir: str, title: str) -> List[str]:
-    """Write one figure with a panel per snapshot time; return its path (or nothing)."""
-    times = sorted(density)
-    if not times:
-        return []
-    grids = [g for t in times for g in density[t]]
-    vmax = max(float(np.max(g.density)) for g in grids) or 1.0
+def plot_density(density: dict, out_dir: str, title: str,
+                 rho_max: Optional[float] = None) -> List[str]:
+    """Write one figure with a panel per snapshot; return its path (or nothing).
+
+    :param rho_max: the cell's density cap [parts/m²], the top of the colour scale (None:
+        the largest density shown).
+    """
+    fig = density_figure(density, title, rho_max)
+    return [] if fig is None else [_save(fig, os.path.join(out_dir, 'density.png'))]
+
+
+def density_figure(density: dict, title: str, rho_max: Optional[float] = None):
+    """Return the density figure (a panel per snapshot time), or None without snapshots.
+
+    Snapshots of the same message (times past the end of the recording) are drawn once.
+    :param density: {requested time [s]: [DensityGridData, ...]}.
+    :param rho_max: the cell's density cap [parts/m²] (None: unknown).
+    """
+    from conveyor_twin.viz import style
+    snapshots = {}
+    for t in sorted(density):
+        key = tuple(g.stamp_ns for g in density[t])
+        snapshots.setdefault(key, density[t])
+    panels = list(snapshots.values())
+    if not panels:
+        return None
+    grids = [g for panel in panels for g in panel]
+    vmax = style.density_vmax(grids, rho_max)
     x0 = min(g.origin_x for g in grids)
     y0 = min(g.origin_y for g in grids)
     x1 = max(g.origin_x + g.resolution * g.density.shape[1] for g in grids)
     y1 = max(g.origin_y + g.resolution * g.density.shape[0] for g in grids)
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
-    fig, axes = _figure(len(times), 1, figsize=(10, 0.6 + len(times) * max(1.0, 10 * aspect)),
-                        squeeze=False, sharex=True)
+    fig, axes = _figure(len(panels), 1, squeeze=False, sharex=True, layout='constrained',
+                        figsize=(10, 0.9 + len(panels) * (0.45 + max(1.0, 8.5 * aspect))))
     image = None
-    for ax, t in zip(axes[:, 0], times):
-        for g in density[t]:
+    for ax, panel in zip(axes[:, 0], panels):
+        for g in panel:
             ny, nx = g.density.shape
-            image = ax.imshow(g.density, origin='lower', cmap='viridis', vmin=0.0, vmax=vmax,
+            image = ax.imshow(g.density, origin='lower', cmap=style.DENSITY_CMAP, vmin=0.0,
+                              vmax=vmax, interpolation='nearest',
                               extent=(g.origin_x, g.origin_x + nx * g.resolution, g.origin_y,
-                                      g.origin_y + ny * g.resolution), interpolation='nearest')
-        stamp = density[t][0].stamp_ns / 1e9
-        total = sum(g.total_parts for g in density[t])
+                                      g.origin_y + ny * g.resolution))
+        stamp = panel[0].stamp_ns / 1e9
+        total = sum(g.total_parts for g in panel)
         ax.set_title(f't = {stamp:.3f} s ({total:.1f} parts)', fontsize=9)
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
         ax.set_ylabel('y [m]')
     axes[-1, 0].set_xlabel('x [m]')
-    fig.suptitle(f'{title}: macro density')
-    fig.tight_layout()
+    fig.suptitle(f'{title}: macro density ({style.density_scale_text(vmax, rho_max)})')
     if image is not None:
-        fig.colorbar(image, ax=axes[:, 0].tolist(), label='density [parts/m²]', shrink=0.9)
-    return [_save(fig, os.path.join(out_dir, 'density.png'))]
+        fig.colorbar(image, ax=axes[:, 0].tolist(), label=style.DENSITY_LABEL, shrink=0.9)
+    return fig
 
 
 def plot_barriers(b: series_mod.BarrierSeries, out_dir: str, title: str) -> List[str]:
@@ -139,6 +184,7 @@ def plot_barriers(b: series_mod.BarrierSeries, out_dir: str, title: str) -> List
                 label='edge: freed' if k == 0 else None)
     ax.set_yticks([1.5 * k + 0.5 for k in range(len(names))])
     ax.set_yticklabels(names)
+    ax.set_ylim(-0.4, 1.5 * max(len(names) - 1, 0) + 1.4)   # every name, blocked or not
     ax.set_xlabel('simulation time [s]')
     ax.set_title(f'{title}: light barriers (high = blocked)')
     ax.grid(axis='x', alpha=0.3)
@@ -150,19 +196,61 @@ def plot_barriers(b: series_mod.BarrierSeries, out_dir: str, title: str) -> List
 
 def plot_named(s: series_mod.NamedSeries, out_dir: str, name: str, title: str,
                ylabel: str) -> List[str]:
-    """Write a commanded (dashed) / actual (solid) figure; return its path."""
+    """Write a commanded (dashed) / actual (wide band) figure; return its path."""
+    from conveyor_twin.viz import style
     fig, ax = _figure(figsize=(10, 4))
-    for k, label in enumerate(s.names):
-        line, = ax.plot(s.t, s.actual[:, k], '-', lw=1.4, label=f'{label} actual')
-        ax.plot(s.t, s.commanded[:, k], '--', lw=1.0, color=line.get_color(),
-                label=f'{label} commanded')
+    style.commanded_and_actual(ax, s.t, s.actual, s.commanded, s.names)
     ax.set_xlabel('simulation time [s]')
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     return [_save(fig, os.path.join(out_dir, name))]
+
+
+def recording_figures(path: str, data: series_mod.Series, out_dir: str, title: str,
+                      ids: Optional[Sequence[int]], count: int) -> Tuple[List[str], List[str]]:
+    """Write every figure the recording has data for; return (paths written, skipped notes).
+
+    :param ids: part ids to draw (None: the ``count`` longest-lived).
+    """
+    from conveyor_twin.viz.frames import recording_cell
+    cell = recording_cell(path)
+    written: List[str] = []
+    skipped: List[str] = []
+    if data.parts is not None and len(data.parts.id):
+        if ids is None:
+            ids = series_mod.pick_parts(data.parts, count).tolist()
+        written += plot_trajectories(data.parts, ids, out_dir, title, cell)
+    else:
+        skipped.append('trajectories_xy.png, trajectories_x.png: no part states recorded')
+    late = [t for t in sorted(data.density) if t > data.end_s + 1e-9]
+    if late:
+        skipped.append(f'density at t = {", ".join(f"{t:g}" for t in late)} s: after the end '
+                       f'of the recording ({data.end_s:.3f} s), its last grid is shown once')
+    if data.density:
+        written += plot_density(data.density, out_dir, title,
+                                cell.rho_max if cell is not None else None)
+    else:
+        skipped.append('density.png: no macro density recorded (no macro zone, or the topic '
+                       'was not recorded)')
+    if data.barriers is not None and (data.barriers.names or data.barriers.edges):
+        written += plot_barriers(data.barriers, out_dir, title)
+    else:
+        skipped.append('light_barriers.png: no light barriers recorded')
+    if data.belts is not None and data.belts.names:
+        written += plot_named(data.belts, out_dir, 'belt_speeds.png',
+                              f'{title}: belt speeds', 'speed [m/s]')
+    else:
+        skipped.append('belt_speeds.png: no belt states recorded')
+    if data.actuators is not None and data.actuators.names:
+        written += plot_named(data.actuators, out_dir, 'actuators.png',
+                              f'{title}: actuator positions', 'position [m or rad]')
+    elif data.actuators is not None:
+        skipped.append('actuators.png: the cell has no actuators')
+    else:
+        skipped.append('actuators.png: no actuator states recorded')
+    return written, skipped
 
 
 def _floats(text: str) -> List[float]:
@@ -211,6 +299,9 @@ def plot_cell_main(argv: List[str]) -> int:
 def main(argv: List[str]) -> int:
     """Draw a cell (``.yaml``) or the figures of a recording; return 0, or 1 if unreadable."""
     words = [a for a in argv if not a.startswith('-')]
+    from conveyor_twin.viz.plant_drawing import is_plant_file, plot_plant_main
+    if any(is_plant_file(a) for a in words):   # a plant of cells: the whole plant
+        return plot_plant_main(argv)
     if any(is_cell_argument(a) for a in words) and not any(
             a.lower().endswith('.mcap') for a in words):
         return plot_cell_main(argv)
@@ -241,21 +332,10 @@ def main(argv: List[str]) -> int:
         return 1
     os.makedirs(args.output, exist_ok=True)
     title = summary['cell_name'] or os.path.basename(args.file)
-    written: List[str] = []
-    if data.parts is not None and len(data.parts.id):
-        ids: Optional[Sequence[int]] = args.part_ids
-        if ids is None:
-            ids = series_mod.pick_parts(data.parts, args.parts).tolist()
-        written += plot_trajectories(data.parts, ids, args.output, title)
-    written += plot_density(data.density, args.output, title)
-    if data.barriers is not None:
-        written += plot_barriers(data.barriers, args.output, title)
-    if data.belts is not None:
-        written += plot_named(data.belts, args.output, 'belt_speeds.png',
-                              f'{title}: belt speeds', 'speed [m/s]')
-    if data.actuators is not None:
-        written += plot_named(data.actuators, args.output, 'actuators.png',
-                              f'{title}: actuator positions', 'position [m or rad]')
+    written, skipped = recording_figures(args.file, data, args.output, title, args.part_ids,
+                                         args.parts)
+    for note in skipped:
+        print(f'conveyor-twin plot: skipped {note}', file=sys.stderr)
     for path in written:
         print(path)
     if not written:

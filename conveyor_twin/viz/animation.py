@@ -16,7 +16,7 @@ from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from conveyor_twin.viz import cell_drawing
+from conveyor_twin.viz import cell_drawing, style
 from conveyor_twin.viz.frames import Frame, RecordingFrames
 
 FORMATS = ('.gif', '.mp4')
@@ -45,10 +45,44 @@ def check_output(path: str) -> str:
     return suffix
 
 
+#: GIF frame delays are whole multiples of this [ms].
+GIF_DELAY_UNIT_MS = 10
+#: Highest frame rate of a GIF: viewers play shorter delays than 20 ms slower [1/s].
+GIF_MAX_FPS = 50.0
+
+
+def check_fps(suffix: str, fps: float) -> None:
+    """:raises AnimationError: if a GIF cannot play at ``fps`` [1/s]."""
+    if suffix == '.gif' and fps > GIF_MAX_FPS:
+        raise AnimationError(f'--fps {fps:g}: a GIF plays at most {GIF_MAX_FPS:g} frames/s '
+                             '(frame delays under 20 ms are slowed down by viewers); '
+                             'lower --fps or write an .mp4')
+
+
+def gif_delays(count: int, fps: float) -> List[int]:
+    """Return ``count`` GIF frame delays [ms], multiples of 10 ms, that sum to ``count / fps``.
+
+    Frame k starts at k / fps rounded to the 10 ms unit, so the delays alternate around
+    1000 / fps (70, 60, 70 ms at 15 frames/s) and the total is exact to half a unit.
+    """
+    unit = GIF_DELAY_UNIT_MS
+    starts = [int(round(k * 1000.0 / fps / unit)) * unit for k in range(count + 1)]
+    return [max(unit, b - a) for a, b in zip(starts[:-1], starts[1:])]
+
+
 def _writer(suffix: str, fps: float):
     from matplotlib import animation
+
+    class ExactGifWriter(animation.PillowWriter):
+        """Pillow's GIF writer with per-frame delays summing to the frame count / fps."""
+
+        def finish(self) -> None:
+            delays = gif_delays(len(self._frames), self.fps)
+            self._frames[0].save(self.outfile, save_all=True, append_images=self._frames[1:],
+                                 duration=delays, loop=0)
+
     if suffix == '.gif':
-        return animation.PillowWriter(fps=fps)
+        return ExactGifWriter(fps=fps)
     return animation.FFMpegWriter(fps=fps, codec='h264', extra_args=['-pix_fmt', 'yuv420p'])
 
 
@@ -76,11 +110,46 @@ def _limits(data: RecordingFrames, view: Optional[Sequence[float]]) -> Tuple[flo
     return x0, x1, y0, y1
 
 
+#: Height of the cell strip at least [in]; a longer cell widens the figure (up to
+#: ``AUTO_WIDTH``), then the view gains room above and below.
+MIN_SCENE_HEIGHT = 1.6
+#: Range of the automatic figure width [in].
+AUTO_WIDTH = (8.0, 13.0)
+_LEFT, _RIGHT, _BAR = 0.7, 0.2, 1.0     # margins and colour bar room [in]
+_TOP, _GAP, _LINES, _BOTTOM = 0.4, 0.75, 1.8, 0.5
+
+
+def scene_layout(limits: Sequence[float], width: Optional[float],
+                 density: bool) -> Tuple[float, float, Tuple[float, ...]]:
+    """Return (figure width [in], strip height [in], view limits [m]) for a view to scale.
+
+    The strip spans the figure's width; its height follows the view's aspect but is at least
+    ``MIN_SCENE_HEIGHT`` (the automatic width grows first, then the view gains room in y) and
+    at most the figure's width (the view gains room in x).
+    :param width: figure width [in], or None to choose it.
+    """
+    x0, x1, y0, y1 = limits
+    side = _LEFT + _RIGHT + (_BAR if density else 0.0)
+    aspect = (y1 - y0) / max(x1 - x0, 1e-9)
+    if width is None:
+        width = min(max(MIN_SCENE_HEIGHT / max(aspect, 1e-9) + side, AUTO_WIDTH[0]),
+                    AUTO_WIDTH[1])
+    strip_w = max(width - side, 1.0)
+    height = strip_w * aspect
+    if height < MIN_SCENE_HEIGHT:
+        extra = (MIN_SCENE_HEIGHT / strip_w * (x1 - x0) - (y1 - y0)) / 2.0
+        y0, y1, height = y0 - extra, y1 + extra, MIN_SCENE_HEIGHT
+    elif height > width:
+        extra = ((y1 - y0) * strip_w / width - (x1 - x0)) / 2.0
+        x0, x1, height = x0 - extra, x1 + extra, width
+    return width, height, (x0, x1, y0, y1)
+
+
 class _Scene:
     """The artists of one figure, updated frame by frame."""
 
     def __init__(self, data: RecordingFrames, *, view: Optional[Sequence[float]],
-                 width: float) -> None:
+                 width: Optional[float]) -> None:
         import matplotlib
         matplotlib.use('Agg')
         from matplotlib import pyplot as plt
@@ -88,18 +157,20 @@ class _Scene:
 
         self.data = data
         cell = data.cell
-        x0, x1, y0, y1 = _limits(data, view)
-        scene_h = width * (y1 - y0) / max(x1 - x0, 1e-9)
-        scene_h = min(max(scene_h, 1.2), 1.2 * width)
-        self.fig = plt.figure(figsize=(width, scene_h + 2.6))
-        grid = self.fig.add_gridspec(2, 2, height_ratios=(scene_h, 2.0), hspace=0.35,
-                                     wspace=0.25, left=0.07, right=0.98, top=0.93, bottom=0.12)
-        ax = self.ax = self.fig.add_subplot(grid[0, :])
+        grids = [g for f in data.frames for g in f.density.values()]
+        width, scene_h, (x0, x1, y0, y1) = scene_layout(_limits(data, view), width,
+                                                        bool(grids))
+        fig_h = _TOP + scene_h + _GAP + _LINES + _BOTTOM
+        self.fig = plt.figure(figsize=(width, fig_h))
+        strip_w = width - _LEFT - _RIGHT - (_BAR if grids else 0.0)
+        ax = self.ax = self.fig.add_axes((_LEFT / width, 1.0 - (_TOP + scene_h) / fig_h,
+                                          strip_w / width, scene_h / fig_h))
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
-        ax.set_aspect('equal')
+        ax.set_aspect('equal', adjustable='datalim')
         ax.tick_params(labelsize=7)
         ax.set_xlabel('x [m]', fontsize=8, labelpad=1)
+        ax.set_ylabel('y [m]', fontsize=8, labelpad=1)
         self.barrier_lines: List = []
         self.actuator_patches: List = []
         if cell is not None:
@@ -108,11 +179,10 @@ class _Scene:
                 ax, cell, [a.initial_position for a in cell.actuators], stroke=False,
                 labels=False)
             self.barrier_lines = cell_drawing.draw_barriers(ax, cell, labels=False)
-        grids = [g for f in data.frames for g in f.density.values()]
-        vmax = cell.rho_max if cell is not None else max(
-            [float(np.max(g.density)) for g in grids] + [1.0])
+        rho_max = cell.rho_max if cell is not None and grids else None
+        vmax = style.density_vmax(grids, rho_max)
         self.density_images = {}
-        cmap = matplotlib.colormaps['inferno_r'].with_extremes(bad=(0.0, 0.0, 0.0, 0.0))
+        cmap = matplotlib.colormaps[style.DENSITY_CMAP].with_extremes(bad=(0.0, 0.0, 0.0, 0.0))
         for grid_ in grids:
             if grid_.zone in self.density_images:
                 continue
@@ -121,12 +191,15 @@ class _Scene:
                       grid_.origin_y + ny * grid_.resolution)
             self.density_images[grid_.zone] = ax.imshow(
                 np.ma.masked_all((ny, nx)), origin='lower', extent=extent, cmap=cmap, vmin=0.0,
-                vmax=vmax, interpolation='nearest', alpha=0.85, zorder=3)
+                vmax=vmax, interpolation='nearest', alpha=0.9, zorder=3)
         if self.density_images:
-            bar = self.fig.colorbar(next(iter(self.density_images.values())), ax=ax,
-                                    fraction=0.025, pad=0.01)
-            bar.set_label('density [parts/m²]', fontsize=7)
+            cax = self.fig.add_axes(((_LEFT + strip_w + 0.12) / width,
+                                     1.0 - (_TOP + scene_h) / fig_h, 0.12 / width,
+                                     scene_h / fig_h))
+            bar = self.fig.colorbar(next(iter(self.density_images.values())), cax=cax)
+            bar.set_label(style.DENSITY_LABEL, fontsize=7, labelpad=2)
             bar.ax.tick_params(labelsize=6)
+            self.density_scale = style.density_scale_text(vmax, rho_max)
         self.discs = []
         self.boxes = []
         types = cell.part_types if cell is not None else ()
@@ -149,26 +222,29 @@ class _Scene:
         self.title = ax.set_title('', fontsize=9)
         self.name = cell.settings.name if cell is not None else os.path.basename(data.path)
         self.cursors = []
-        self._timelines(grid)
+        self._timelines(width, fig_h)
 
-    def _timelines(self, grid) -> None:
+    def _timelines(self, width: float, fig_h: float) -> None:
         data = self.data
-        ax_b = self.fig.add_subplot(grid[1, 0])
+        names = data.barriers.names
+        left_b = 0.25 + 0.06 * max([len(n) for n in names] + [4])  # barrier names [in]
+        half = 0.5 * width
+        bottom, height = _BOTTOM / fig_h, _LINES / fig_h
+        ax_b = self.fig.add_axes((left_b / width, bottom, (half - 0.2 - left_b) / width,
+                                  height))
         t, blocked, _ = data.barriers.arrays()
-        for k, name in enumerate(data.barriers.names):
+        for k, name in enumerate(names):
             ax_b.step(t, 1.5 * k + blocked[:, k], where='post', lw=0.9)
-        ax_b.set_yticks([1.5 * k + 0.5 for k in range(len(data.barriers.names))])
-        ax_b.set_yticklabels(data.barriers.names, fontsize=7)
+        ax_b.set_yticks([1.5 * k + 0.5 for k in range(len(names))])
+        ax_b.set_yticklabels(names, fontsize=7)
+        ax_b.set_ylim(-0.3, 1.5 * max(len(names) - 1, 0) + 1.3)   # every name, blocked or not
         ax_b.set_title('light barriers (high = blocked)', fontsize=8)
-        ax_v = self.fig.add_subplot(grid[1, 1])
+        ax_v = self.fig.add_axes(((half + 0.45) / width, bottom,
+                                  (half - 0.45 - _RIGHT) / width, height))
         t_v, actual, commanded = data.belts.arrays()
-        for k, name in enumerate(data.belts.names):
-            line, = ax_v.plot(t_v, actual[:, k], '-', lw=1.1, label=name)
-            if commanded.shape[1] > k:
-                ax_v.plot(t_v, commanded[:, k], '--', lw=0.8, color=line.get_color())
-        if data.belts.names:
-            ax_v.legend(fontsize=6, loc='lower right')
-        ax_v.set_title('belt speeds [m/s] (dashed: commanded)', fontsize=8)
+        style.commanded_and_actual(ax_v, t_v, actual, commanded, data.belts.names,
+                                   fontsize=6)
+        ax_v.set_title('belt speeds [m/s]', fontsize=8)
         for ax in (ax_b, ax_v):
             ax.set_xlim(data.start_s, max(data.end_s, data.start_s + 1e-3))
             ax.set_xlabel('simulation time [s]', fontsize=7, labelpad=1)
@@ -218,7 +294,7 @@ class _Scene:
             cursor.set_xdata([frame.t, frame.t])
         text = f'{self.name}: t = {frame.t:6.2f} s, {shown} parts (micro)'
         if self.density_images:
-            text += f', {macro:.1f} parts (macro)'
+            text += f', {macro:.1f} parts (macro; {self.density_scale})'
         self.title.set_text(text)
 
 
@@ -239,13 +315,13 @@ def progress_bar(done: int, total: int, width: int = 30) -> str:
     return f'[{"#" * filled}{"." * (width - filled)}] {done:>4}/{total} frames'
 
 
-def render(data: RecordingFrames, path: str, *, fps: float, dpi: int = 80,
-           width: float = 10.0, view: Optional[Sequence[float]] = None,
+def render(data: RecordingFrames, path: str, *, fps: float, dpi: int = 90,
+           width: Optional[float] = None, view: Optional[Sequence[float]] = None,
            progress: Optional[Callable[[int, int], None]] = None) -> int:
     """Write the animation of ``data`` to ``path`` (.gif or .mp4); return the frame count.
 
     :param fps: frames per second of the file [1/s].
-    :param dpi: resolution [dots per inch]; ``width`` [in].
+    :param dpi: resolution [dots per inch]; ``width`` [in] (None: from the view's aspect).
     :param view: (x0, x1) or (x0, x1, y0, y1) to show [m] (default: the whole cell).
     :param progress: called with (frames written, total) after every frame.
     :raises AnimationError: if the output cannot be written (the output is left untouched).
@@ -253,6 +329,7 @@ def render(data: RecordingFrames, path: str, *, fps: float, dpi: int = 80,
     from matplotlib import pyplot as plt
 
     suffix = check_output(path)
+    check_fps(suffix, fps)
     scene = _Scene(data, view=view, width=width)
     handle, tmp = tempfile.mkstemp(suffix=suffix, prefix='.animate-',
                                    dir=os.path.dirname(os.path.abspath(path)))

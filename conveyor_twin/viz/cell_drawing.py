@@ -11,6 +11,7 @@ import math
 from typing import List, Sequence, Tuple
 
 from conveyor_twin.cell.model import Actuator, Cell, Obstacle
+from conveyor_twin.viz.label_placement import add_label, place_labels
 
 BELT_FACE = '#d9d9d9'
 BELT_EDGE = '#6e6e6e'
@@ -62,12 +63,9 @@ def _rect(region: Sequence[float]) -> Tuple[Tuple[float, float], float, float]:
 
 
 def _label(ax, x: float, y: float, text: str, colour: str, *, dy: float = 0.0,
-           **kwargs) -> None:
-    ax.annotate(text, (x, y), xytext=(0, dy), textcoords='offset points', fontsize=LABEL_SIZE,
-                color=colour, ha=kwargs.pop('ha', 'center'), va=kwargs.pop('va', 'center'),
-                bbox=dict(boxstyle='round,pad=0.15', fc='white', ec='none', alpha=0.75),
-                arrowprops=(dict(arrowstyle='-', color=colour, lw=0.6) if dy else None),
-                **kwargs)
+           dx: float = 0.0) -> None:
+    """Name the point (x, y) [m]; (dx, dy) is the preferred side, placed by ``place_labels``."""
+    add_label(ax, x, y, text, colour, direction=(dx, dy or -1.0), fontsize=LABEL_SIZE)
 
 
 def draw_static(ax, cell: Cell, *, labels: bool = True) -> None:
@@ -87,17 +85,16 @@ def draw_static(ax, cell: Cell, *, labels: bool = True) -> None:
                                 alpha=0.6, zorder=1))
         if labels:
             _label(ax, cx + 0.5 * arrow * dx, cy + 0.5 * arrow * dy,
-                   f'belt {belt.name} ({belt.speed:g} m/s)', '#333333', dy=-12)
+                   f'belt {belt.name} ({belt.speed:g} m/s)', '#333333', dy=-1.0)
     for zone in cell.zones:
         colour = ZONE_COLOURS.get(zone.policy, 'black')
         xy, w, h = _rect(zone.region)
         ax.add_patch(Rectangle(xy, w, h, fill=False, ec=colour, lw=1.0, ls=(0, (6, 3)),
                                zorder=2))
         if labels:
-            ax.annotate(f'zone {zone.name}: {zone.policy} ({zone.resolution * 1e3:g} mm grid)',
-                        (zone.region[0], zone.region[1]), xytext=(3, 3),
-                        textcoords='offset points', fontsize=LABEL_SIZE, color=colour,
-                        ha='left', va='bottom', zorder=8)
+            _label(ax, zone.region[0], zone.region[1],
+                   f'zone {zone.name}: {zone.policy} ({zone.resolution * 1e3:g} mm grid)',
+                   colour, dx=1.0, dy=1.0)
     for source in cell.sources:
         xy, w, h = _rect(source.region)
         ax.add_patch(Rectangle(xy, w, h, fc=SOURCE_COLOUR, ec=SOURCE_COLOUR, alpha=0.3,
@@ -105,20 +102,21 @@ def draw_static(ax, cell: Cell, *, labels: bool = True) -> None:
         if labels:
             _label(ax, xy[0] + 0.5 * w, source.region[1],
                    f'source {source.name}: {source.rate:g}/s {source.part_type}',
-                   SOURCE_COLOUR, dy=-14)
+                   SOURCE_COLOUR, dy=-1.0)
     for sink in cell.sinks:
         xy, w, h = _rect(sink.region)
         ax.add_patch(Rectangle(xy, w, h, fc=SINK_COLOUR, ec=SINK_COLOUR, alpha=0.25,
                                hatch='xx', zorder=2))
         if labels:
             _label(ax, xy[0] + 0.5 * w, sink.region[1], f'sink {sink.name}', SINK_COLOUR,
-                   dy=-24)
-    for k, obstacle in enumerate(cell.obstacles):
+                   dy=-1.0)
+    mid_y = 0.5 * (view_limits(cell)[2] + view_limits(cell)[3]) if cell.obstacles else 0.0
+    for obstacle in cell.obstacles:
         for patch in _obstacle_patches(obstacle, Circle, Polygon):
             ax.add_patch(patch)
         if labels:
             x, y = _obstacle_anchor(obstacle)
-            _label(ax, x, y, obstacle.name, OBSTACLE_FACE, dy=-12 if k % 2 else 12)
+            _label(ax, x, y, obstacle.name, OBSTACLE_FACE, dy=1.0 if y >= mid_y else -1.0)
 
 
 def _obstacle_patches(obstacle: Obstacle, Circle, Polygon) -> list:
@@ -168,7 +166,7 @@ def draw_actuators(ax, cell: Cell, positions: Sequence[float], *, stroke: bool =
             what = 'lift' if act.kind == 'stopper' else 'stroke'
             name = act.name if act.name == act.kind else f'{act.name} ({act.kind})'
             _label(ax, act.base[0], act.base[1], f'{name}: {what} {low:g}..{high:g} {unit}',
-                   '#8a6a00', dy=26)
+                   '#8a6a00', dy=1.0)
     return patches
 
 
@@ -197,14 +195,14 @@ def _hull(points: Sequence[Tuple[float, float]]) -> List[Tuple[float, float]]:
 def draw_barriers(ax, cell: Cell, *, labels: bool = True) -> list:
     """Draw every light barrier as its beam (free colour); return the line artists."""
     lines = []
-    for k, barrier in enumerate(cell.light_barriers):
+    for barrier in cell.light_barriers:
         (x0, y0), (x1, y1) = barrier.start, barrier.end
         line, = ax.plot([x0, x1], [y0, y1], '-', color=BEAM_FREE, lw=1.6, zorder=6)
         ax.plot([x0, x1], [y0, y1], 'o', color=BEAM_FREE, ms=2.5, zorder=6)
         lines.append(line)
         if labels:
             _label(ax, x0, y0, f'{barrier.name} (beam {barrier.height * 1e3:g} mm)', BEAM_FREE,
-                   dy=-30 if k % 2 else -40)
+                   dy=-1.0)
     return lines
 
 
@@ -236,6 +234,17 @@ def view_limits(cell: Cell, margin: float = 0.08) -> Tuple[float, float, float, 
     return min(xs) - margin, max(xs) + margin, min(ys) - margin, max(ys) + margin
 
 
+def label_room(limits: Tuple[float, float, float, float],
+               min_ratio: float = 0.22) -> Tuple[float, float, float, float]:
+    """Return ``limits`` (x0, x1, y0, y1) [m] widened in y to at least ``min_ratio`` of x.
+
+    A long thin cell gets room above and below for the names of its elements.
+    """
+    x0, x1, y0, y1 = limits
+    extra = max(0.0, min_ratio * (x1 - x0) - (y1 - y0))
+    return x0, x1, y0 - 0.5 * extra, y1 + 0.5 * extra
+
+
 def figure_size(limits: Tuple[float, float, float, float], width: float = 14.0,
                 min_height: float = 3.0) -> Tuple[float, float]:
     """Return a figure size [in] of ``width`` whose axes keep the cell's aspect ratio."""
@@ -244,17 +253,18 @@ def figure_size(limits: Tuple[float, float, float, float], width: float = 14.0,
     return width, max(min_height, min(height, 2.0 * width))
 
 
-def plot_cell(cell: Cell, path: str, *, dpi: int = 110, width: float = 14.0) -> str:
-    """Write a PNG of the cell's layout to scale, every element named; return ``path``.
+def cell_figure(cell: Cell, *, width: float = 14.0, dpi: float = 110):
+    """Return (figure, axes) of the cell's layout to scale, every element named.
 
+    The labels are placed (none overlaps another or the ticks) for this ``dpi``.
     :param width: figure width [in].
     """
     import matplotlib
     matplotlib.use('Agg')
     from matplotlib import pyplot as plt
 
-    limits = view_limits(cell)
-    fig, ax = plt.subplots(figsize=figure_size(limits, width))
+    limits = label_room(view_limits(cell))
+    fig, ax = plt.subplots(figsize=figure_size(limits, width), dpi=dpi)
     draw_static(ax, cell)
     draw_actuators(ax, cell, [a.initial_position for a in cell.actuators])
     draw_barriers(ax, cell)
@@ -267,6 +277,18 @@ def plot_cell(cell: Cell, path: str, *, dpi: int = 110, width: float = 14.0) -> 
     ax.set_title(f"cell '{cell.settings.name}' (frame {cell.settings.frame_id}, to scale)",
                  fontsize=10)
     fig.tight_layout()
+    place_labels(ax)
+    return fig, ax
+
+
+def plot_cell(cell: Cell, path: str, *, dpi: int = 110, width: float = 14.0) -> str:
+    """Write a PNG of the cell's layout to scale, every element named; return ``path``.
+
+    :param width: figure width [in].
+    """
+    from matplotlib import pyplot as plt
+
+    fig, _ = cell_figure(cell, width=width, dpi=dpi)
     fig.savefig(path, dpi=dpi, bbox_inches='tight', pad_inches=0.1)
     plt.close(fig)
     return path

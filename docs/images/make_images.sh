@@ -36,5 +36,5 @@ PY
     --record-decimate parts=20 light_barriers=5 belt_states=5 actuator_states=20
 
 "$ct" animate "$work/jam.mcap" -o "$here/deflector_jam.gif" --speed 1.5 --fps 8 \
-    --view 1.6,4.0 --width 8 --dpi 60 --quiet
+    --view 1.6,4.0,-0.3,0.3 --width 8 --dpi 72 --quiet
 ls -l "$here/default_cell.png" "$here/deflector_jam.gif"
