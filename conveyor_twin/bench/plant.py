@@ -99,7 +99,7 @@ def processes(path: Path, duration: float) -> Dict[str, float]:
     out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=1800)
     if out.returncode != 0:
         raise RuntimeError(f'plant run failed ({out.returncode}): {out.stderr[-2000:]}')
-    summary = json.loads(out.stdout.strip().splitlines()[-1])
+    summary = json.loads(out.stdout)   # the summary is all stdout carries
     rtf = min(summary['cells_rtf'].values())
     wall = duration / rtf
     left = summary['ledger']['left']

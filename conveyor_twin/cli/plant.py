@@ -1,28 +1,37 @@
 """``conveyor-twin plant PLANT.yaml``: run a plant of cells, print progress and the ledger.
 
 ``--processes`` (default): one process per cell (``conveyor-twin plant PLANT.yaml --cell NAME``
-each), coupled over ROS 2 topics; the same command with ``--cell`` runs one cell, e.g. on
-another host (docs/plant.md). ``--composed``: every cell in this process. A bad plant or cell
-file exits with status 2 before anything starts.
+each), coupled over ROS 2 topics, supervised: a cell process that dies is reported (exit status,
+last output, the plant's diagnostics) and the others run on; ``--restart-dead N`` starts a dead
+cell again, up to N times. The same command with ``--cell`` runs one cell, e.g. on another host
+(docs/plant.md). ``--composed``: every cell in this process.
+
+Progress lines go to standard error, the summary to standard output (``--json``: one JSON
+object and nothing else). Exit status: 0 the run completed (or was interrupted, without an end),
+1 it did not complete, 2 a bad plant file or option (before anything starts), 3 a cell process
+or a background thread died (even if restarted).
 """
 
 import argparse
 import json
 import os
 import signal
-import subprocess
 import sys
 import time
-from typing import Dict, List, Optional
+from typing import List, Optional, Sequence
 
 from conveyor_twin.cell.errors import CellError
 from conveyor_twin.coord.timing import TimeMode
+from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health
 from conveyor_twin.plant.loader import load_plant
 from conveyor_twin.plant.model import Plant
 
 DEFAULT_DURATION = 10.0  # s of simulated time
 #: Longest wait for the cells after the end step, and for a cell to stop [s].
 FINISH_TIMEOUT = 60.0
+#: With a cell dead for good, a run of fixed duration ends once no other cell has stepped for
+#: this long (the cells that depend on the dead one wait for it forever) [s of wall time].
+STALLED_AFTER = 10.0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -53,8 +62,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--record', default='', metavar='DIR',
                    help="record each cell's streams to DIR/<cell>.mcap (replay them with "
                    '`conveyor-twin replay`)')
-    p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
-    p.add_argument('--quiet', action='store_true', help='no progress lines')
+    p.add_argument('--restart-dead', type=int, default=0, metavar='N',
+                   help='--processes: start a cell process that died again, at most N times '
+                   'per cell (default 0: report it, keep the other cells running)')
+    p.add_argument('--json', action='store_true',
+                   help='print the summary as one JSON object (the only output on stdout)')
+    p.add_argument('--quiet', action='store_true', help='no progress lines (on stderr)')
+    p.add_argument('--foxglove', default='', metavar='[HOST:]PORT',
+                   help='serve one live Foxglove view of every cell (docs/foxglove.md)')
     return p
 
 
@@ -105,30 +120,57 @@ def run_cell(plant: Plant, args: argparse.Namespace) -> int:
                           'real_time_factor': node.real_time_factor()}, sort_keys=True),
               flush=True)
         context.try_shutdown()
-    return 1 if node.error is not None else 0
+    if node.error is not None or not node.health.ok:
+        print(f'conveyor-twin plant: cell {args.cell!r} failed: '
+              + '; '.join(f.describe() for f in node.health.failures), file=sys.stderr)
+        return EXIT_BACKGROUND_FAILURE
+    return 0
 
 
-def _progress_line(wall: float, steps: Dict[str, int], ledger, step: float) -> str:
-    lowest = min(steps.values()) if steps else 0
-    cells = ' '.join(f'{k}:{v}' for k, v in steps.items())
-    return (f'[{wall:6.1f} s] plant at {max(lowest, 0) * step:7.3f} s  steps {cells}  '
-            f'entered {ledger.entered:g} in cells {ledger.in_cells:g} in links '
+def _progress_line(wall: float, monitor, step: float, dead: Sequence[str] = ()) -> str:
+    """One progress line: the plant's time (every cell's simulated time over all its runs, the
+    least of them), every cell's step in its current run, and the ledger."""
+    simulated = monitor.simulated_steps()
+    restarts = monitor.restarts()
+    lowest = min(simulated.values()) if simulated else 0
+    cells = []
+    for name, v in monitor.steps().items():
+        mark = ' dead' if name in dead else ''
+        run = f' run {restarts[name] + 1}' if restarts.get(name) else ''
+        cells.append(f'{name}:{v}' + (f'({(run + mark).strip()})' if run or mark else ''))
+    ledger = monitor.ledger()
+    return (f'[{wall:6.1f} s] plant at {max(lowest, 0) * step:7.3f} s  steps {" ".join(cells)}'
+            f'  entered {ledger.entered:g} in cells {ledger.in_cells:g} in links '
             f'{ledger.in_links} left {ledger.left:g}')
+
+
+def _cell_command(args: argparse.Namespace, name: str) -> List[str]:
+    cmd = [sys.executable, '-m', 'conveyor_twin.cli', 'plant', args.plant, '--cell', name,
+           '--mode', args.mode, '--duration', repr(args.duration), '--quiet', '--hold']
+    if args.no_streams:
+        cmd.append('--no-streams')
+    if args.record:
+        cmd += ['--record', args.record]
+    return cmd
 
 
 def run_plant(plant: Plant, args: argparse.Namespace) -> int:
     """Run the whole plant (processes or composed), print progress and the summary."""
+    from conveyor_twin.plant.supervisor import CellProcesses
     from conveyor_twin.ros.plant_node import ComposedPlant, PlantMonitor
     end = int(round(args.duration / plant.step)) if args.duration > 0 else 0
     context = _init_ros()
     stop = _interrupts()
-    monitor = PlantMonitor(plant, context=context)
+    health = Health()
+    monitor = PlantMonitor(plant, context=context, health=health)
     from conveyor_twin.ros.compat import make_executor
     executor = make_executor(context)
     executor.add_node(monitor.node)
+    view = _start_foxglove(plant, args, monitor.node, health)  # None without --foxglove
     composed: Optional[ComposedPlant] = None
-    procs: List[subprocess.Popen] = []
+    cells: Optional[CellProcesses] = None
     t0 = time.monotonic()
+    finals: List[dict] = []
     try:
         if args.monitor:
             pass
@@ -138,17 +180,11 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
                                      record=args.record)
             composed.start()
         else:
-            for c in plant.cells:
-                cmd = [sys.executable, '-m', 'conveyor_twin.cli', 'plant', args.plant,
-                       '--cell', c.name, '--mode', args.mode, '--duration',
-                       repr(args.duration), '--quiet', '--hold']
-                if args.no_streams:
-                    cmd.append('--no-streams')
-                if args.record:
-                    cmd += ['--record', args.record]
-                procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True,
-                                              start_new_session=True))
+            cells = CellProcesses({c.name: _cell_command(args, c.name) for c in plant.cells},
+                                  health=health, restarts=args.restart_dead)
+            cells.start()
         last = 0.0
+        moved_at, seen = time.monotonic(), monitor.simulated_steps()
         while not stop:
             executor.spin_once(timeout_sec=0.05)
             now = time.monotonic()
@@ -156,62 +192,86 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
                 last = now
                 monitor.publish_diagnostics()
                 if not args.quiet:
-                    print(_progress_line(now - t0, monitor.steps(), monitor.ledger(),
-                                         plant.step), flush=True)
+                    print(_progress_line(now - t0, monitor, plant.step,
+                                         cells.dead if cells else ()),
+                          file=sys.stderr, flush=True)
             if end and monitor.all_done():
                 break
-            if composed is not None and composed.error is not None:
+            if composed is not None and (composed.error is not None or composed.failures()):
                 break
-            early = [c.name for c, p in zip(plant.cells, procs) if p.poll() is not None
-                     and (p.returncode != 0 or c.name not in monitor.reports
-                          or not monitor.reports[c.name].done)]
-            if early:
-                codes = {c.name: p.poll() for c, p in zip(plant.cells, procs)}
-                print(f'conveyor-twin plant: cell process(es) {early} ended early (exit codes '
-                      f'{codes})', file=sys.stderr)
+            if cells is None:
+                continue
+            cells.watch(lambda name: name in monitor.reports and monitor.reports[name].done)
+            steps = monitor.simulated_steps()
+            if steps != seen:
+                moved_at, seen = now, steps
+            live = [c.name for c in plant.cells if c.name not in cells.dead]
+            if end and cells.dead and (
+                    all(n in monitor.reports and monitor.reports[n].done for n in live)
+                    or now - moved_at >= STALLED_AFTER):
+                print(f'conveyor-twin plant: ending the run: cell(s) {cells.dead} dead, the '
+                      'others done or waiting for them', file=sys.stderr, flush=True)
                 break
         for _ in range(10):  # the last reports
             executor.spin_once(timeout_sec=0.02)
         monitor.publish_diagnostics()
     finally:
+        if view is not None:
+            view.stop()
         if composed is not None:
             composed.stop()
-        finals = []
-        for p in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        for p in procs:
-            try:
-                out, _ = p.communicate(timeout=FINISH_TIMEOUT)
-            except subprocess.TimeoutExpired:
-                os.killpg(p.pid, signal.SIGKILL)
-                out, _ = p.communicate()
-            lines = [x for x in (out or '').splitlines() if x.startswith('{')]
-            if lines:
-                finals.append(json.loads(lines[-1]))
+        if cells is not None:
+            finals = cells.stop(FINISH_TIMEOUT)
         executor.shutdown(timeout_sec=2.0)
         monitor.destroy()
         context.try_shutdown()
     ledger = monitor.ledger()
     wall = time.monotonic() - t0
     steps = monitor.steps()
+    simulated = monitor.simulated_steps()
+    failures = [f.describe() for f in health.failures]
+    if composed is not None:
+        failures += composed.failures()
     layout = 'composed' if args.composed else 'monitor' if args.monitor else 'processes'
     summary = {'plant': plant.name, 'layout': layout,
                'mode': args.mode, 'cells': len(plant.cells), 'steps': steps,
+               'simulated_steps': simulated,
                'sim_time_s': max(min(steps.values()), 0) * plant.step, 'wall_s': wall,
                'ledger': ledger.as_dict(),
                'state_hashes': {m.cell: m.state_hash for m in monitor.reports.values()},
-               'cells_rtf': {m.cell: m.real_time_factor for m in monitor.reports.values()}}
+               'cells_rtf': {m.cell: m.real_time_factor for m in monitor.reports.values()},
+               'restarts': cells.restarts() if cells else {}, 'dead': cells.dead if cells
+               else [], 'failures': failures, 'cell_summaries': len(finals)}
     summary['real_time_factor'] = summary['sim_time_s'] / wall if wall > 0 else 0.0
     if args.json:
-        print(json.dumps(summary, sort_keys=True))
+        print(json.dumps(summary, sort_keys=True), flush=True)
     else:
         print(f"conveyor_twin plant {plant.name!r}: {len(plant.cells)} cells "
               f"({summary['layout']}), {args.mode} mode, {summary['sim_time_s']:.3f} s "
               f"simulated in {wall:.1f} s (real-time factor {summary['real_time_factor']:.2f})")
         print(ledger.text())
+    if failures:
+        print('conveyor-twin plant: failed: ' + '; '.join(failures), file=sys.stderr)
+        return EXIT_BACKGROUND_FAILURE
     complete = bool(end) and monitor.all_done()
     return 0 if complete or (not end and stop) else 1
+
+
+def _start_foxglove(plant: Plant, args: argparse.Namespace, node, health: Health):
+    """Start the plant's Foxglove view (``--foxglove``) on ``node``; None without it."""
+    if not args.foxglove:
+        return None
+    from conveyor_twin.ros.foxglove_bridge import attach_plant
+    from conveyor_twin.viz.foxglove_view import FoxgloveError
+    try:
+        view = attach_plant(node, plant, args.foxglove, health=health)
+    except FoxgloveError as exc:  # before any cell starts
+        print(f'conveyor-twin plant: {exc}', file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
+    host = args.foxglove.rpartition(':')[0] or '127.0.0.1'
+    print(f'conveyor-twin plant: Foxglove view at ws://{host}:{view.port}', file=sys.stderr,
+          flush=True)
+    return view
 
 
 def main(argv: List[str]) -> int:
@@ -230,10 +290,25 @@ def main(argv: List[str]) -> int:
         print(f'conveyor-twin plant: --run-id: got {args.run_id}; expected an integer in '
               '[0, 2^64)', file=sys.stderr)
         return 2
+    if args.restart_dead < 0:
+        print(f'conveyor-twin plant: --restart-dead: got {args.restart_dead}; expected an '
+              'integer >= 0 (restarts per cell)', file=sys.stderr)
+        return 2
     if args.record and args.no_streams:
         print('conveyor-twin plant: --record needs the cells\' streams (not --no-streams)',
               file=sys.stderr)
         return 2
+    if args.foxglove:  # one view of the whole plant, served by the parent or the monitor
+        from conveyor_twin.viz.foxglove_view import FoxgloveError, parse_address
+        try:
+            parse_address(args.foxglove)
+        except FoxgloveError as exc:
+            print(f'conveyor-twin plant: {exc}', file=sys.stderr)
+            return 2
+        if args.cell or args.no_streams:
+            print("conveyor-twin plant: --foxglove shows every cell's streams: not with --cell "
+                  'or --no-streams', file=sys.stderr)
+            return 2
     if args.cell:
         if args.cell not in [c.name for c in plant.cells]:
             print(f'conveyor-twin plant: {args.plant}: no cell {args.cell!r} (cells: '

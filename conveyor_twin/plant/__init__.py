@@ -4,6 +4,7 @@
 :mod:`~conveyor_twin.plant.geometry` the exits and entries of its links,
 :mod:`~conveyor_twin.plant.link` a link's two ends, :mod:`~conveyor_twin.plant.sync` the
 conservative synchronisation rule, :mod:`~conveyor_twin.plant.cell` one cell of the plant,
-:mod:`~conveyor_twin.plant.ledger` the plant-wide part ledger and
-:mod:`~conveyor_twin.plant.runner` all cells stepped in one process.
+:mod:`~conveyor_twin.plant.ledger` the plant-wide part ledger,
+:mod:`~conveyor_twin.plant.runner` all cells stepped in one process,
+:mod:`~conveyor_twin.plant.supervisor` one process per cell, watched and restarted on request.
 """

@@ -26,6 +26,7 @@ import numpy as np
 from conveyor_twin.coord.assembly import AssembledTwin, build_twin
 from conveyor_twin.micro.state import C_NEXT_ID, C_REGION_LEFT, C_REMOVED, PT_BRAD
 from conveyor_twin.plant.geometry import entry_pose, mark_inside, to_link
+from conveyor_twin.plant.ledger import CellReport
 from conveyor_twin.plant.link import LinkEntry, LinkExit, Transit
 from conveyor_twin.plant.model import ID_RANGE, Plant, PlantCell
 from conveyor_twin.plant.sync import horizon
@@ -80,8 +81,11 @@ class PlantCellCore:
         """The last step this cell may compute now (:func:`~conveyor_twin.plant.sync.horizon`)."""
         limit = horizon(self.entries, self.exits)
         if self.lockstep:
-            for end in (*self.entries, *self.exits):
+            for end in self.entries:
                 limit = min(limit, end.peer_through + 1)
+            for end in self.exits:
+                if not end.peer_final:   # a finished entry cell steps no more
+                    limit = min(limit, end.peer_through + 1)
         return limit
 
     def may_step(self) -> bool:
@@ -178,6 +182,23 @@ class PlantCellCore:
         return {'entered': total - inserted, 'in_cell': in_cell, 'left': left,
                 'vanished': vanished, 'sent': float(sum(x.sent for x in self.exits)),
                 'inserted': inserted}
+
+    def report(self, *, done: bool = False, with_hash: bool = False) -> CellReport:
+        """Return the cell's report now (what ``progress`` carries; ``with_hash``: with its
+        state digest)."""
+        c = self.counts()
+        return CellReport(
+            cell=self.name, run=self.run, step=self.step_index, done=done,
+            entered=c['entered'], in_cell=c['in_cell'], left=c['left'], vanished=c['vanished'],
+            exit_link=[x.link.name for x in self.exits], exit_sent=[x.sent for x in self.exits],
+            exit_accepted=[x.accepted for x in self.exits],
+            exit_resent=[x.resent for x in self.exits],
+            entry_link=[e.link.name for e in self.entries],
+            entry_inserted=[e.inserted for e in self.entries],
+            entry_waiting=list(self.waiting),
+            entry_earlier=[e.earlier for e in self.entries],
+            entry_dropped=[e.dropped for e in self.entries],
+            state_hash=self.state_hash() if with_hash else '')
 
     def state_hash(self) -> str:
         """Return a SHA-256 digest of the cell's micro state and of every part it sent."""

@@ -10,7 +10,7 @@ has run in :class:`Acceptances` batches.
 
 Both batch kinds carry ``through``: the step the sending cell has completed, which is what the
 other end needs to know how far it may run (:mod:`conveyor_twin.plant.sync`). A batch is what
-travels between processes (:mod:`conveyor_twin.ros.plant_node`) or is handed over directly
+travels between processes (:mod:`conveyor_twin.ros.plant_cell_node`) or is handed over directly
 (:mod:`conveyor_twin.plant.runner`): the same data either way.
 """
 

@@ -215,6 +215,7 @@ def plant_from_mapping(data: Any, source_file: str = '<memory>',
         exits[key] = link.name
         links.append(link)
     top.done()
+    _refuse_cycles(source_file, list(cells), links)
     linked_sinks: Dict[str, set] = {}
     for link in links:
         if link.source.sink is not None:
@@ -228,6 +229,48 @@ def plant_from_mapping(data: Any, source_file: str = '<memory>',
         final.append(c)
     return Plant(source_file=source_file, name=name, namespace=namespace, step=float(step),
                  cells=tuple(final), links=tuple(links))
+
+
+def _refuse_cycles(source_file: str, cells: List[str], links: List[Link]) -> None:
+    """Raise if the links lead from a cell back to itself (a loop or a ring of cells).
+
+    A plant is a directed acyclic graph of cells: the ids, the ledger and a restart's
+    numbering follow parts downstream only (docs/plant.md, "Links").
+
+    :raises PlantError: naming the link that closes the first cycle found, the cells and
+        the links of the cycle.
+    """
+    out: Dict[str, List[Tuple[int, str]]] = {c: [] for c in cells}
+    for i, link in enumerate(links):
+        out[link.source.cell].append((i, link.target.cell))
+    state: Dict[str, int] = {c: 0 for c in cells}   # 0 new, 1 on the path, 2 done
+    path: List[Tuple[str, int]] = []                 # (cell, index of the link into it)
+
+    def visit(cell: str) -> None:
+        state[cell] = 1
+        for i, nxt in out[cell]:
+            if state[nxt] == 1:
+                start = next(k for k, (c, _) in enumerate(path) if c == nxt)
+                ring = path[start:]
+                names = [c for c, _ in ring] + [nxt]
+                through = [links[j].name for _, j in ring[1:]] + [links[i].name]
+                raise PlantError(
+                    source_file, f'links[{i}]', links[i].name,
+                    'links without a cycle: this link closes the cycle '
+                    + ' -> '.join(names) + ' (links ' + ', '.join(through) + '); a part '
+                    'may not come back to a cell it left (no recirculation: see '
+                    'docs/plant.md)')
+            if state[nxt] == 0:
+                path.append((nxt, i))
+                visit(nxt)
+                path.pop()
+        state[cell] = 2
+
+    for cell in cells:
+        if state[cell] == 0:
+            path.append((cell, -1))
+            visit(cell)
+            path.pop()
 
 
 def load_plant(path: Union[str, Path]) -> Plant:

@@ -151,3 +151,21 @@ def test_the_default_cell_by_name():
     data = {'plant': {'name': 'p'}, 'cells': [{'name': 'a', 'file': 'default'}]}
     plant = plant_from_mapping(data, 'p.yaml', RES)
     assert plant.cells[0].cell.settings.name == 'seed_test_rig' and plant.links == ()
+
+
+def test_a_ring_of_cells_is_refused_naming_the_cycle():
+    data = chain()
+    data['links'].append({'name': 'back', 'from': {'cell': 'second', 'sink': 'exit'},
+                          'to': {'cell': 'first', 'belt': 'main'}, 'delay_steps': 10})
+    e = error(data)
+    assert e.key_path == 'links[2]' and e.value == 'back'
+    assert 'first -> second -> first (links first_second, back)' in str(e)
+    assert str(e).startswith('p.yaml: links[2]: got ')
+
+
+def test_a_cell_feeding_itself_is_refused():
+    data = chain()
+    data['links'].append({'name': 'loop', 'from': {'cell': 'second', 'sink': 'exit'},
+                          'to': {'cell': 'second', 'belt': 'main'}, 'delay_steps': 10})
+    e = error(data)
+    assert e.key_path == 'links[2]' and 'cycle second -> second (links loop)' in str(e)
