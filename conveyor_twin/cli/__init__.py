@@ -4,6 +4,8 @@ import importlib
 import sys
 from typing import List, Optional
 
+from conveyor_twin import __version__
+
 # verb -> (module, one-line help). Each module has ``main(argv: List[str]) -> int``.
 VERBS = {
     'run': ('conveyor_twin.cli.run', 'run the twin on a cell (default: the embedded cell)'),
@@ -21,12 +23,15 @@ VERBS = {
                 'render a recording as a GIF or MP4 (parts, density, barriers, belts)'),
     'resimulate': ('conveyor_twin.cli.resimulate',
                    're-run a recording and compare every message bit for bit'),
+    'foxglove-layout': ('conveyor_twin.cli.foxglove_layout',
+                        "write the Foxglove layout of a cell's (or a plant's) live view"),
 }
 
 
 def _usage() -> str:
-    lines = ['usage: conveyor-twin VERB [options]', '', 'verbs:']
-    lines += [f'  {verb:<12}{help_}' for verb, (_, help_) in VERBS.items()]
+    lines = ['usage: conveyor-twin [--version] VERB [options]', '', 'verbs:']
+    width = max(len(verb) for verb in VERBS) + 2
+    lines += [f'  {verb:<{width}}{help_}' for verb, (_, help_) in VERBS.items()]
     lines += ['', "'conveyor-twin VERB --help' describes a verb."]
     return '\n'.join(lines)
 
@@ -38,6 +43,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(_usage())
         return 0 if argv else 2
     verb = argv[0]
+    if verb in ('-V', '--version'):
+        print(f'conveyor-twin {__version__}')
+        return 0
     if verb not in VERBS:
         print(f'conveyor-twin: unknown verb {verb!r}\n\n{_usage()}', file=sys.stderr)
         return 2

@@ -9,9 +9,15 @@ twin pays nothing. Commands published by Foxglove clients go through the coordin
 book like ``belt_command``/``actuator_command`` (rejections are counted in ``diagnostics`` and
 logged); ``step``, ``reset`` and ``spawn_parts`` are served by the coordinator's own service
 callbacks (requests and responses in CDR). The address is the nodes' read-only parameter
-``foxglove`` (``conveyor-twin run --foxglove``, ``LockstepTwin(foxglove=...)``).
+``foxglove`` (``conveyor-twin run --foxglove``, ``LockstepTwin(foxglove=...)``). The view's
+threads report their failures to the twin's ``health``.
+
+A plant (:func:`attach_plant`, ``conveyor-twin plant --foxglove``): one
+:class:`~conveyor_twin.viz.foxglove_plant.PlantView` of every cell, fed by raw subscriptions to
+each cell's streams under its namespace (:class:`PlantStreams`).
 """
 
+import itertools
 import threading
 from typing import Any, Callable, Dict, List, Optional
 
@@ -19,7 +25,7 @@ from conveyor_twin_msgs.srv import Reset, SpawnParts, Step
 from rclpy.serialization import deserialize_message, serialize_message
 
 from conveyor_twin import contract
-from conveyor_twin.coord.commands import BELT, CommandRejected
+from conveyor_twin.coord.commands import BELT, CommandRejected, SEQUENCE_MAX
 from conveyor_twin.ros.endpoints import create_subscription
 from conveyor_twin.record.topics import resolve
 from conveyor_twin.viz.foxglove_view import (DEFAULT_BACKLOG, DEFAULT_SCENE_RATE,
@@ -30,6 +36,8 @@ from conveyor_twin.wire.cdr import stamp_of
 
 _TIME = (f"\n{schemas.SEPARATOR}\nMSG: builtin_interfaces/Time\n"
          + schemas.MSG_TEXTS['builtin_interfaces/msg/Time'])
+#: ``sender`` of the commands Foxglove clients publish (numbered in ``sequence``).
+FOXGLOVE_SENDER = 'foxglove'
 #: (name, type, request ros2msg text, response ros2msg text) of the services (msg_defs/srv).
 SERVICE_TEXTS = (
     ('step', 'conveyor_twin_msgs/srv/Step', 'uint32 steps\n',
@@ -136,12 +144,15 @@ def _view(coordinator: Any, twin: Any, cell: Any, **rates: Any) -> FoxgloveView:
     streams: Dict[str, str] = {resolve(topic.name, namespace): topic.type_name
                                for topic in contract.STREAMS}
 
+    numbers = itertools.count(1)  # the view's commands, in order (sequence of sender foxglove)
+
     def on_command(kind: str, name: str, value: float) -> Optional[str]:
+        sequence = next(numbers) & SEQUENCE_MAX
         try:
             if kind == BELT:
-                twin.commands.submit_belt(name, value)
+                twin.commands.submit_belt(name, value, FOXGLOVE_SENDER, sequence)
             else:
-                twin.commands.submit_actuator(name, value)
+                twin.commands.submit_actuator(name, value, FOXGLOVE_SENDER, sequence)
         except CommandRejected as exc:
             coordinator.report_rejected(exc)
             return str(exc)
@@ -154,7 +165,7 @@ def _view(coordinator: Any, twin: Any, cell: Any, **rates: Any) -> FoxgloveView:
                      for name, type_name, request, response in SERVICE_TEXTS)
     view = FoxgloveView(cell, streams=streams, namespace=namespace,
                         step_s=cell.settings.step, on_command=on_command,
-                        services=services, **rates)
+                        services=services, health=twin.health, **rates)
     view.on_invalid = lambda reason: _count_invalid(twin, coordinator, reason)
     return view
 
@@ -172,3 +183,56 @@ def _count_invalid(twin: Any, coordinator: Any, reason: str) -> None:
     """Count a client message that is no valid command (undecodable, other topic) like a
     rejected command: in ``diagnostics`` and the log."""
     coordinator.report_rejected(twin.commands.reject('foxglove_invalid', reason))
+
+
+def attach_plant(node: Any, plant: Any, address: str, *, health: Any = None,
+                 stream_rate: float = DEFAULT_STREAM_RATE,
+                 scene_rate: float = DEFAULT_SCENE_RATE) -> Any:
+    """Start one Foxglove server showing every cell of ``plant``; return the view.
+
+    ``node`` (spun by the caller) subscribes to every cell's streams under the cell's
+    namespace while a client watches (best effort: a view that falls behind loses messages,
+    never slows a cell), whether the cells run in other processes or in this one.
+
+    :raises FoxgloveError: if the address is invalid, the host unknown or the port taken.
+    """
+    from conveyor_twin.viz.foxglove_plant import PlantView
+    view = PlantView(plant, stream_rate=stream_rate, scene_rate=scene_rate, health=health)
+    streams = PlantStreams(node, view)
+    view.on_active = streams.set_active
+    host, port = parse_address(address)
+    view.start(host, port)
+    return view
+
+
+class PlantStreams:
+    """Raw subscriptions of one node to every stream a :class:`PlantView` serves, created
+    when the first client subscribes and destroyed when the last one goes."""
+
+    def __init__(self, node: Any, view: Any) -> None:
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        self.node = node
+        self.view = view
+        self.qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                              reliability=ReliabilityPolicy.BEST_EFFORT)
+        self._types = {t.name: t.type_name for t in contract.STREAMS}
+        self._subscriptions: List[Any] = []
+        self._lock = threading.Lock()
+
+    def set_active(self, active: bool) -> None:
+        """Subscribe (True) or unsubscribe (False) every cell's streams."""
+        from conveyor_twin.ros.endpoints import message_class
+        with self._lock:
+            if active and not self._subscriptions:
+                self._subscriptions = [
+                    self.node.create_subscription(message_class(self._types[rel]), topic,
+                                                  self._callback(topic), self.qos, raw=True)
+                    for topic, (_, rel, _) in self.view.streams.items()]
+            elif not active:
+                for subscription in self._subscriptions:
+                    self.node.destroy_subscription(subscription)
+                self._subscriptions = []
+
+    def _callback(self, topic: str) -> Callable[[bytes], None]:
+        sink = self.view.sink
+        return lambda data: sink(topic, stamp_of(data), data)

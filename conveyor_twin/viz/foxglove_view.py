@@ -17,27 +17,35 @@ Channels: every contract stream under its ROS topic name, ``cdr`` encoding, ``ro
 position, light barriers red while blocked, parts with their shapes) and ``scene/density/ZONE``
 (``foxglove.Grid``: the macro density) built by a scene thread at ``scene_rate``, off the
 stepping thread. Clients may publish ``belt_command``/``actuator_command`` (``cdr`` or ``json``);
-they go to ``on_command``, which validates them like the ROS topics. Services (``step``,
-``reset``, ``spawn_parts``) take and answer CDR.
+JSON values must be finite JSON numbers (:mod:`conveyor_twin.viz.foxglove_messages`); they go
+to ``on_command``, which validates them like the ROS topics. Services (``step``, ``reset``,
+``spawn_parts``) take and answer CDR.
+
+The SDK's server listens on a free loopback port behind a
+:class:`~conveyor_twin.viz.foxglove_proxy.SubprotocolProxy` at the address asked for, which
+accepts both names of the protocol (``foxglove.sdk.v1``, ``foxglove.websocket.v1``). An
+exception in the view's threads, or in its callbacks from the SDK, is reported to the twin's
+:class:`~conveyor_twin.health.Health` (:data:`SCENE_FAILURE`, ...).
 
 No rclpy here: the ROS side (:mod:`conveyor_twin.ros.foxglove_bridge`) supplies the hooks.
 """
 
 from collections import deque
 from dataclasses import dataclass
-import json
 import socket
 import threading
 import time
-from typing import Callable, Deque, Dict, List, Optional, Tuple
+from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
 
 import numpy as np
 
 from conveyor_twin import contract as streams_contract
 from conveyor_twin.cell.model import Cell
+from conveyor_twin.health import Health
 from conveyor_twin.output.frame import Frame
 from conveyor_twin.output.markers import CellMarkers
 from conveyor_twin.record import topics as contract
+from conveyor_twin.viz.foxglove_messages import CommandParseError, decode_command, density_grid
 from conveyor_twin.wire import cdr, schemas
 
 DEFAULT_HOST = '127.0.0.1'
@@ -50,6 +58,11 @@ DEFAULT_SCENE_RATE = 30.0
 DEFAULT_BACKLOG = 1024
 #: Publisher thread period [s].
 PUBLISH_PERIOD = 0.01
+# While no client watches, the view's threads sleep until one subscribes (or the view stops);
+# they look again after this long at most [s], so they never poll the interpreter lock.
+IDLE_WAIT = 1.0
+#: Where the SDK's server listens, behind the subprotocol proxy (any free port).
+INNER_HOST = '127.0.0.1'
 SCENE_TOPIC = 'scene'
 DENSITY_GRID_TOPIC = 'scene/density'
 #: Streams sent every message (events and slow streams); the others at ``stream_rate``.
@@ -57,6 +70,10 @@ EVERY_MESSAGE = frozenset(('light_barrier_edges', 'diagnostics', 'markers', 'fau
 #: Streams whose latest message the scene is drawn from.
 SCENE_STREAMS = frozenset(('parts', 'light_barriers', 'actuator_states'))
 COMMAND_TOPICS = {'belt_command': 'belt', 'actuator_command': 'actuator'}
+#: Names the view's failures are reported under in the twin's :class:`Health`.
+PUBLISHER_FAILURE = 'foxglove view (publisher thread)'
+SCENE_FAILURE = 'foxglove view (scene thread)'
+CLIENT_FAILURE = 'foxglove view (client input)'
 
 CommandHook = Callable[[str, str, float], Optional[str]]
 ServiceHandler = Callable[[bytes], bytes]
@@ -100,6 +117,40 @@ def check_host(host: str) -> None:
         raise FoxgloveError(f'--foxglove: unknown host {host!r} ({exc})') from None
 
 
+def serve(start: Callable[[], Any], host: str, port: int, health: Health) -> Tuple[Any, Any]:
+    """Start an SDK server on a free loopback port (``start()``) behind a
+    :class:`~conveyor_twin.viz.foxglove_proxy.SubprotocolProxy` at ``host:port``; return both.
+
+    :raises FoxgloveError: if either cannot listen (nothing is left running).
+    """
+    from conveyor_twin.viz.foxglove_proxy import SubprotocolProxy
+    try:
+        server = start()
+    except Exception as exc:  # the SDK raises its own error types
+        raise FoxgloveError(f'--foxglove: the Foxglove server cannot start ({exc})') from None
+    try:
+        proxy = SubprotocolProxy(host, port, server.port, health=health)
+    except OSError as exc:
+        server.stop()
+        raise FoxgloveError(f'--foxglove {host}:{port}: cannot listen there ({exc})') from None
+    return server, proxy
+
+
+def density_zones(cell: Cell) -> List[str]:
+    """Names of the zones of ``cell`` with a density grid (policy ``macro`` or ``auto``)."""
+    return [zone.name for zone in cell.zones if zone.policy in ('macro', 'auto')]
+
+
+def served_topics(cell: Cell, namespace: str = '') -> List[str]:
+    """Every topic the view of ``cell`` under ``namespace`` serves: the contract streams, the
+    scene and one density grid per macro zone (absolute names)."""
+    topics = [contract.resolve(topic.name, namespace) for topic in streams_contract.STREAMS]
+    topics.append(contract.resolve(SCENE_TOPIC, namespace))
+    topics += [contract.resolve(f'{DENSITY_GRID_TOPIC}/{zone}', namespace)
+               for zone in density_zones(cell)]
+    return topics
+
+
 class FoxgloveView:
     """The Foxglove server of one twin.
 
@@ -113,6 +164,8 @@ class FoxgloveView:
     :param stream_rate: rate of the per-step streams sent to clients [Hz].
     :param scene_rate: rate of the scene [Hz].
     :param backlog: queued messages at most, here and per client in the SDK [1].
+    :param health: where the view's threads report an exception (the twin's ``health``;
+        default: a health of its own, printed on standard error).
     """
 
     def __init__(self, cell: Cell, *, streams: Dict[str, str], namespace: str = '',
@@ -120,8 +173,10 @@ class FoxgloveView:
                  services: Tuple[ServiceSpec, ...] = (),
                  stream_rate: float = DEFAULT_STREAM_RATE,
                  scene_rate: float = DEFAULT_SCENE_RATE,
-                 backlog: int = DEFAULT_BACKLOG) -> None:
+                 backlog: int = DEFAULT_BACKLOG,
+                 health: Optional[Health] = None) -> None:
         self.cell = cell
+        self.health = health if health is not None else Health()
         self.namespace = namespace
         self.streams = dict(streams)
         self.on_command = on_command
@@ -157,9 +212,11 @@ class FoxgloveView:
         self._client_channels: Dict[Tuple[int, int], Tuple[str, str]] = {}
         self._lock = threading.Lock()
         self._stop = threading.Event()
+        self._watched = threading.Event()  # set while a client is subscribed, or to stop
         self._threads: List[threading.Thread] = []
         self._markers = CellMarkers(cell)
         self.server = None
+        self.proxy = None
         self.port = 0
         self.channels: Dict[str, object] = {}
 
@@ -248,23 +305,19 @@ class FoxgloveView:
                                              'visualization_msgs/msg/MarkerArray')
         from foxglove.channels import GridChannel
         self._grid_channels = {
-            zone.name: GridChannel(contract.resolve(f'{DENSITY_GRID_TOPIC}/{zone.name}',
-                                                    self.namespace), context=context)
-            for zone in self.cell.zones}
-        try:
-            self.server = foxglove.start_server(
-                name=f'conveyor_twin: {self.cell.settings.name}', host=host, port=port,
-                capabilities=[Capability.ClientPublish, Capability.Services, Capability.Time],
-                server_listener=_Listener(self), supported_encodings=['cdr', 'json'],
-                services=[self._service(foxglove, s) for s in self.services],
-                context=context, message_backlog_size=self.backlog)
-        except Exception as exc:  # the SDK raises its own error types for bind failures
-            raise FoxgloveError(f'--foxglove {host}:{port}: cannot listen there ({exc})') \
-                from None
-        self.port = self.server.port
-        for target, name in ((self._publish_loop, 'foxglove_publish'),
-                             (self._scene_loop, 'foxglove_scene')):
-            thread = threading.Thread(target=target, name=name, daemon=True)
+            zone: GridChannel(contract.resolve(f'{DENSITY_GRID_TOPIC}/{zone}', self.namespace),
+                              context=context)
+            for zone in density_zones(self.cell)}
+        self.server, self.proxy = serve(lambda: foxglove.start_server(
+            name=f'conveyor_twin: {self.cell.settings.name}', host=INNER_HOST, port=0,
+            capabilities=[Capability.ClientPublish, Capability.Services, Capability.Time],
+            server_listener=_Listener(self), supported_encodings=['cdr', 'json'],
+            services=[self._service(foxglove, s) for s in self.services],
+            context=context, message_backlog_size=self.backlog), host, port, self.health)
+        self.port = self.proxy.port
+        for target, name in ((self._publish_loop, PUBLISHER_FAILURE),
+                             (self._scene_loop, SCENE_FAILURE)):
+            thread = self.health.thread(name, target)
             thread.start()
             self._threads.append(thread)
         return self.port
@@ -292,8 +345,12 @@ class FoxgloveView:
     def stop(self) -> None:
         """Stop the threads and the server (clients are disconnected)."""
         self._stop.set()
+        self._watched.set()
         for thread in self._threads:
             thread.join(2.0)
+        if self.proxy is not None:
+            self.proxy.stop()
+            self.proxy = None
         if self.server is not None:
             self.server.stop()
             self.server = None
@@ -301,7 +358,12 @@ class FoxgloveView:
     # -- threads -------------------------------------------------------------------------
     def _publish_loop(self) -> None:
         queue = self._queue
-        while not self._stop.wait(PUBLISH_PERIOD):
+        while not self._stop.is_set():
+            if not self.active and not queue:
+                self._watched.wait(IDLE_WAIT)
+                continue
+            if self._stop.wait(PUBLISH_PERIOD):
+                break
             while queue:
                 topic, stamp_ns, data = queue.popleft()
                 self.channels[topic].log(data, log_time=stamp_ns)
@@ -310,6 +372,10 @@ class FoxgloveView:
     def _scene_loop(self) -> None:
         next_time = time.monotonic()
         while not self._stop.is_set():
+            if not self.active:
+                self._watched.wait(IDLE_WAIT)
+                next_time = time.monotonic()
+                continue
             next_time += self.scene_period
             delay = next_time - time.monotonic()
             if delay < 0.0:
@@ -358,6 +424,10 @@ class FoxgloveView:
                 self._queue.clear()
                 self._frames = 0
             self.active = active
+            if active:
+                self._watched.set()
+            elif not self._stop.is_set():
+                self._watched.clear()
             if changed:  # under the lock: the ROS side sees the changes in order
                 self.on_active(active)
 
@@ -378,9 +448,9 @@ class FoxgloveView:
             return self._invalid(f'{topic or "an unadvertised channel"}: clients may publish '
                                  'only belt_command and actuator_command')
         try:
-            name, value = _decode_command(kind, encoding, data)
-        except (ValueError, KeyError, TypeError) as exc:
-            return self._invalid(f'{topic}: cannot decode the {encoding} message ({exc})')
+            name, value = decode_command(kind, encoding, data)
+        except CommandParseError as exc:
+            return self._invalid(f'{topic}: invalid {encoding} command, not applied: {exc}')
         reason = self.on_command(kind, name, value)
         if reason is not None:
             return self._reject(reason)
@@ -400,39 +470,11 @@ class FoxgloveView:
         return reason
 
     def counters(self) -> Dict[str, float]:
-        """Return the view's counters: clients' subscriptions, sent, dropped, rejected."""
+        """Return the view's counters: clients' subscriptions, sent, dropped, rejected
+        commands, scenes, clients refused for their subprotocol."""
         return {'subscriptions': len(self._subscriptions), 'sent': self.sent,
-                'dropped': self.dropped, 'rejected': self.rejected, 'scenes': self.scenes}
-
-
-def _decode_command(kind: str, encoding: str, data: bytes) -> Tuple[str, float]:
-    field = 'belt' if kind == 'belt' else 'actuator'
-    value_field = 'speed' if kind == 'belt' else 'position'
-    if encoding == 'json':
-        msg = json.loads(bytes(data).decode('utf-8'))
-        return str(msg[field]), float(msg[value_field])
-    if encoding != 'cdr':
-        raise ValueError(f'encoding {encoding!r} is not cdr or json')
-    if kind == 'belt':
-        return cdr.decode_belt_command(bytes(data))
-    return cdr.decode_actuator_command(bytes(data))
-
-
-def density_grid(grid: cdr.DensityGridData):
-    """Return a ``foxglove.schemas.Grid`` of a DensityGrid (one float32 field ``density``)."""
-    from foxglove.schemas import (Grid, NumericType, PackedElementField, Pose, Quaternion,
-                                  Timestamp, Vector2, Vector3)
-    ny, nx = grid.density.shape
-    return Grid(
-        timestamp=Timestamp(sec=grid.stamp_ns // 1_000_000_000,
-                            nsec=grid.stamp_ns % 1_000_000_000),
-        frame_id=grid.frame_id,
-        pose=Pose(position=Vector3(x=grid.origin_x, y=grid.origin_y, z=0.001),
-                  orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
-        column_count=nx, cell_size=Vector2(x=grid.resolution, y=grid.resolution),
-        row_stride=4 * nx, cell_stride=4,
-        fields=[PackedElementField(name='density', offset=0, type=NumericType.Float32)],
-        data=np.ascontiguousarray(grid.density, '<f4').tobytes())
+                'dropped': self.dropped, 'rejected': self.rejected, 'scenes': self.scenes,
+                'refused_clients': self.proxy.refused if self.proxy is not None else 0}
 
 
 def _density_zone(data: bytes) -> str:
@@ -441,22 +483,30 @@ def _density_zone(data: bytes) -> str:
 
 
 class _Listener:
-    """The SDK's server listener: subscriptions and client channels to the view."""
+    """The SDK's server listener: subscriptions and client channels to the view.
+
+    The SDK calls these on its own thread; an exception is reported to the view's health as
+    :data:`CLIENT_FAILURE` (once), not left to the SDK's log.
+    """
 
     def __init__(self, view: FoxgloveView) -> None:
         self.view = view
 
+    def _call(self, target: Callable[..., object], *args) -> None:
+        self.view.health.guard(CLIENT_FAILURE, target)(*args)
+
     def on_subscribe(self, client, channel) -> None:
-        self.view._subscribed((client.id, channel.id), channel.topic, True)
+        self._call(self.view._subscribed, (client.id, channel.id), channel.topic, True)
 
     def on_unsubscribe(self, client, channel) -> None:
-        self.view._subscribed((client.id, channel.id), channel.topic, False)
+        self._call(self.view._subscribed, (client.id, channel.id), channel.topic, False)
 
     def on_client_advertise(self, client, channel) -> None:
-        self.view._advertised((client.id, channel.id), channel.topic, channel.encoding)
+        self._call(self.view._advertised, (client.id, channel.id), channel.topic,
+                   channel.encoding)
 
     def on_client_unadvertise(self, client, client_channel_id: int) -> None:
-        self.view._unadvertised((client.id, client_channel_id))
+        self._call(self.view._unadvertised, (client.id, client_channel_id))
 
     def on_message_data(self, client, client_channel_id: int, data: bytes) -> None:
-        self.view.client_message((client.id, client_channel_id), data)
+        self._call(self.view.client_message, (client.id, client_channel_id), data)

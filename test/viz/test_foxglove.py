@@ -216,17 +216,45 @@ def test_slow_client_never_stalls_the_twin(ros_context):
         composed.stop()
 
 
-def test_an_older_subprotocol_is_refused_and_the_twin_goes_on(twin):
-    from websockets.exceptions import InvalidHandshake, InvalidStatus
+@pytest.mark.parametrize('subprotocol', ['foxglove.sdk.v1', 'foxglove.websocket.v1'])
+def test_both_names_of_the_protocol_are_accepted(twin, subprotocol):
+    """Foxglove offers foxglove.sdk.v1; Lichtblick and older Foxglove foxglove.websocket.v1."""
     from conveyor_twin.ros.foxglove_bridge import attach
     view = attach(twin, '127.0.0.1:0')
     twin.start()
     try:
-        with pytest.raises((InvalidStatus, InvalidHandshake)):
+        with websockets_client.connect(f'ws://127.0.0.1:{view.port}',
+                                       subprotocols=[subprotocol]) as ws:
+            assert ws.subprotocol == subprotocol
+            channels = _advertised(ws)
+            _subscribe(ws, channels, ['/clock'])
+            deadline = _Deadline()
+            stamps = [log_time for _, (_, log_time, _) in zip(range(3),
+                                                             _messages(ws, deadline))]
+        assert stamps == sorted(stamps) and len(set(stamps)) == 3
+        assert view.counters()['refused_clients'] == 0
+    finally:
+        twin.runner.stop()
+        view.stop()
+
+
+def test_another_subprotocol_is_refused_plainly_and_the_twin_goes_on(twin):
+    from websockets.exceptions import InvalidStatus
+    from conveyor_twin.ros.foxglove_bridge import attach
+    view = attach(twin, '127.0.0.1:0')
+    twin.start()
+    try:
+        with pytest.raises(InvalidStatus) as info:
             with websockets_client.connect(f'ws://127.0.0.1:{view.port}',
-                                           subprotocols=['foxglove.websocket.v1'],
+                                           subprotocols=['foxglove.websocket.v2'],
                                            open_timeout=TIMEOUT):
                 pass
+        response = info.value.response
+        assert response.status_code == 400
+        text = response.body.decode()
+        assert 'foxglove.sdk.v1 or foxglove.websocket.v1' in text
+        assert 'offered foxglove.websocket.v2' in text
+        assert view.counters()['refused_clients'] == 1
         before = twin.twin.step_index
         deadline = _Deadline()
         while twin.twin.step_index <= before:
