@@ -11,6 +11,7 @@ No ROS imports: the cores, the sinks and the nodes all use it.
 """
 
 from dataclasses import dataclass
+import os
 import sys
 import threading
 import time
@@ -27,7 +28,8 @@ class Failure:
 
     :param name: what failed, as a person reads it (``'foxglove view'``, ``'recorder writer'``).
     :param error: the exception's one-line description (``repr``), or the process' exit status.
-    :param traceback: the formatted traceback ('' for a process that only gave an exit code).
+    :param traceback: the formatted traceback (for a process: what it left, e.g. the last
+        lines of its log, or '').
     :param wall_time: when it was reported [s, ``time.time()``].
     """
 
@@ -65,13 +67,19 @@ class Health:
         self._failures: List[Failure] = []
         self._repeats = 0
         self._printer = printer or _print_stderr
+        #: False until the first failure: a plain attribute, cheap enough to read every step.
+        self.failed = False
+        #: Set at the first failure (wait on it instead of polling).
+        self.event = threading.Event()
         #: Called with each new :class:`Failure` (e.g. to stop the run, log through ROS).
         self.listeners: List[Callable[[Failure], None]] = []
 
     def report(self, name: str, exc: Optional[BaseException] = None, *,
-               message: str = '') -> Failure:
+               message: str = '', detail: str = '') -> Failure:
         """Record that ``name`` failed, with its exception (or a ``message`` without one).
 
+        :param detail: printed with the report in place of a traceback when there is no
+            exception (e.g. the last lines of a dead process's log).
         :return: the failure recorded for ``name`` (the first one, if it was already reported).
         """
         if exc is not None:
@@ -79,7 +87,7 @@ class Health:
             trace = ''.join(traceback.format_exception(type(exc), exc, exc.__traceback__))
         else:
             error = message or 'failed'
-            trace = ''
+            trace = detail
         with self._lock:
             for known in self._failures:
                 if known.name == name:
@@ -87,6 +95,7 @@ class Health:
                     return known
             failure = Failure(name=name, error=error, traceback=trace, wall_time=time.time())
             self._failures.append(failure)
+            self.failed = True
             listeners = list(self.listeners)
         self._printer(f'conveyor_twin: {name} failed: {error}\n{trace}'.rstrip() + '\n')
         for listener in listeners:
@@ -94,6 +103,7 @@ class Health:
                 listener(failure)
             except Exception as listener_exc:  # a listener must not hide the failure
                 self._printer(f'conveyor_twin: a failure listener raised {listener_exc!r}\n')
+        self.event.set()  # after the report is out and the listeners ran
         return failure
 
     @property
@@ -115,6 +125,10 @@ class Health:
             return False, 'every background thread and process alive'
         return True, 'failed: ' + '; '.join(f.describe() for f in failures)
 
+    def summary(self) -> List[dict]:
+        """Every failure as ``{'name', 'error'}`` (for a run's JSON summary)."""
+        return [{'name': f.name, 'error': f.error} for f in self.failures]
+
     def raise_if_failed(self) -> None:
         """Raise :class:`BackgroundFailure` if anything failed."""
         failures = self.failures
@@ -135,6 +149,26 @@ class Health:
         """Return an unstarted thread (named ``name``) whose exception is reported as ``name``."""
         return threading.Thread(target=self.guard(name, target), args=args,
                                 name=name.replace(' ', '_'), daemon=daemon)
+
+
+def process_alive(pid: int) -> bool:
+    """Return True if process ``pid`` runs (a zombie, ended but not yet reaped, does not)."""
+    try:
+        with open(f'/proc/{pid}/stat', 'rb') as f:
+            stat = f.read()
+    except FileNotFoundError:
+        return False
+    except OSError:  # no /proc: ask the kernel
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True
+        return True
+    # the state follows the command name in parentheses (which may contain anything)
+    state = stat[stat.rfind(b')') + 2:stat.rfind(b')') + 3]
+    return state not in (b'Z', b'X', b'x')
 
 
 def _print_stderr(text: str) -> None:

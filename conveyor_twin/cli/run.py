@@ -2,21 +2,31 @@
 
 Composed (default): the micro, macro and coordinator nodes in this process, stepped in memory.
 ``--split``: the three nodes as three processes coupled over ROS topics.
+
+Exit codes: 0 done; 1 invalid cell, or the twin could not start; 2 invalid options;
+3 stopped after a failure of a step, a background thread or a node process (reported once with
+its traceback, ERROR in the diagnostics, named in the summary).
 """
 
 import argparse
+from collections import deque
 import json
 import os
 import signal
 import subprocess
 import sys
+import threading
 import time
-from typing import List
+from typing import Deque, Dict, IO, List
 
 from conveyor_twin.cell import CellError, load_cell
 from conveyor_twin.coord.timing import TimeMode
+from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health
 
 DEFAULT_DURATION = 10.0  # s of simulated time
+LOG_TAIL_LINES = 20  # lines of a dead node process's log shown in its report
+CHILD_POLL = 0.1  # s between two checks that the split layout's processes live
+COORDINATOR_GRACE = 30.0  # s the coordinator may take to stop after a node process died
 
 
 def ros_environment() -> None:
@@ -69,6 +79,8 @@ def _print_summary(summary: dict, as_json: bool) -> None:
     if as_json:
         print(json.dumps(summary, sort_keys=True))
         return
+    for failure in summary.get('failures', ()):
+        print(f"conveyor_twin: FAILED: {failure['name']}: {failure['error']}")
     st = summary['step_time_ms']
     print(f"conveyor_twin: cell {summary['cell']!r}, seed {summary['seed']}, "
           f"{summary['mode']} mode, {summary['steps']} steps ({summary['sim_time_s']:.3f} s "
@@ -89,6 +101,7 @@ def run_composed(args: argparse.Namespace) -> int:
     import rclpy
     from rclpy.context import Context
 
+    from conveyor_twin.coord.runner import raise_thread_priority, realtime_priority
     from conveyor_twin.ros.compose import ComposedTwin
 
     try:
@@ -132,41 +145,112 @@ def run_composed(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
     signal.signal(signal.SIGTERM, lambda *_: interrupted.append(True))
     start = time.monotonic()
+    health = twin.health
     twin.start()
+    if mode is TimeMode.REALTIME:  # this thread takes the GIL the stepping thread needs
+        raise_thread_priority(realtime_priority(helper=True))
     tty = sys.stderr.isatty()
     try:
         next_progress = start + 1.0
-        while not interrupted:
+        while not interrupted and not health.failed:
             if mode is not TimeMode.LOCKSTEP and not twin.runner.running:
                 break
             if max_steps is not None and twin.twin.step_index >= max_steps:
                 break
-            time.sleep(0.02)
+            health.event.wait(0.02)
             if not args.quiet and time.monotonic() >= next_progress:
                 next_progress += 1.0
                 line = _progress(twin.coordinator.summary(), time.monotonic() - start)
                 print(('\r' + line) if tty else line, end='' if tty else '\n',
                       file=sys.stderr, flush=True)
     finally:
-        twin.stop()
+        twin.stop()  # after a failure: publishes (and records) the ERROR diagnostics first
         summary = twin.coordinator.summary()
         if recording is not None:
-            summary['recording'] = recording.close()
+            try:
+                summary['recording'] = recording.close()
+            except RecordingError as exc:  # the writer failed: reported to the health
+                summary['recording'] = {'error': str(exc)}
         context.try_shutdown()
+    if health.failed:
+        summary['failures'] = health.summary()
     if not args.quiet and tty:
         print(file=sys.stderr)
     _print_summary(summary, args.json)
     if recording is not None and not args.json:
-        print(format_recording(summary['recording']))
-    if twin.runner.error is not None:
-        print(f'simulation stopped with an error: {twin.runner.error!r}', file=sys.stderr)
-        return 1
-    return 0
+        print(format_recording(summary['recording']) if 'error' not in summary['recording']
+              else f"  recording failed: {summary['recording']['error']}")
+    return _failure_exit(summary)
+
+
+def _failure_exit(summary: dict) -> int:
+    """Return 0, or :data:`EXIT_BACKGROUND_FAILURE` naming the failures on stderr."""
+    failures = summary.get('failures')
+    if not failures:
+        return 0
+    names = '; '.join(f"{f['name']}: {f['error']}" for f in failures)
+    print(f'conveyor-twin run: stopped after a failure ({names}); exit code '
+          f'{EXIT_BACKGROUND_FAILURE}', file=sys.stderr, flush=True)
+    return EXIT_BACKGROUND_FAILURE
+
+
+class _Child:
+    """A node process of the split layout whose log is passed on to our stderr, keeping its
+    last lines for a report should it die.
+
+    :param read_stdout: the caller reads the process's stdout (the coordinator's summary);
+        otherwise stdout joins the log (our stdout stays the summary's alone).
+    """
+
+    def __init__(self, name: str, argv: List[str], env: Dict[str, str], *,
+                 read_stdout: bool = False) -> None:
+        self.name = name
+        self.tail: Deque[str] = deque(maxlen=LOG_TAIL_LINES)
+        self.proc = subprocess.Popen(
+            argv, env=env, stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE if read_stdout else subprocess.STDOUT,
+            text=True, errors='replace')
+        log = self.proc.stderr if read_stdout else self.proc.stdout
+        self._relay_thread = threading.Thread(target=self._relay, args=(log,),
+                                              name=f'{name}_log', daemon=True)
+        self._relay_thread.start()
+
+    def _relay(self, stream: IO[str]) -> None:
+        for line in stream:
+            self.tail.append(line)
+            sys.stderr.write(line)
+        sys.stderr.flush()
+
+    def report(self, health: Health, when: str) -> None:
+        """Report this process's end to ``health`` with its exit code and log tail."""
+        self._relay_thread.join(2.0)  # the rest of what it wrote
+        code = self.proc.returncode
+        tail = ''.join(self.tail) or '(it wrote nothing)\n'
+        health.report(f'{self.name} process', message=f'exited with code {code} {when}',
+                      detail=f'last lines of its log:\n{tail}')
+
+
+def _watch(children: List[_Child], coordinator: _Child, health: Health,
+           done: threading.Event) -> None:
+    """Report a node process that ends before the run is over; give the coordinator
+    :data:`COORDINATOR_GRACE` to stop by itself, then interrupt it."""
+    failed_at = None
+    while not done.wait(CHILD_POLL):
+        for child in children:
+            if child.proc.poll() is not None and not done.is_set():
+                child.report(health, 'during the run')
+                if failed_at is None:
+                    failed_at = time.monotonic()
+        if (failed_at is not None and time.monotonic() - failed_at > COORDINATOR_GRACE
+                and coordinator.proc.poll() is None):
+            coordinator.proc.send_signal(signal.SIGINT)
+            failed_at = float('inf')
 
 
 def run_split(args: argparse.Namespace) -> int:
     """Start the three node processes, wait for the coordinator, print its summary."""
-    from conveyor_twin.ros.split import ros_args, SUMMARY_PREFIX
+    from conveyor_twin.ros.split import ros_args, SCALE_PIDS_ENV, SUMMARY_PREFIX
+    from conveyor_twin.ros.standalone import IGNORE_SIGINT_ENV
 
     cell_file = os.path.abspath(args.cell) if args.cell else ''
     try:
@@ -186,17 +270,24 @@ def run_split(args: argparse.Namespace) -> int:
                             args.markers_rate, foxglove=args.foxglove or '',
                             scenario=scenario_file)
     env = dict(os.environ)
-    modules = ['conveyor_twin.ros.micro_node', 'conveyor_twin.ros.macro_node']
-    scales = [subprocess.Popen([sys.executable, '-m', m] + process_args, env=env)
-              for m in modules]
-    coordinator = subprocess.Popen(
-        [sys.executable, '-m', 'conveyor_twin.ros.split'] + process_args, env=env,
-        stdout=subprocess.PIPE, text=True)
+    health = Health()  # this process's view of the three node processes
+    scale_env = dict(env, **{IGNORE_SIGINT_ENV: '1'})  # stopped by SIGTERM, after the coordinator
+    scales = [_Child(name, [sys.executable, '-m', module] + process_args, scale_env)
+              for name, module in (('micro_simulator', 'conveyor_twin.ros.micro_node'),
+                                   ('macro_simulator', 'conveyor_twin.ros.macro_node'))]
+    env[SCALE_PIDS_ENV] = ','.join(f'{c.name}={c.proc.pid}' for c in scales)
+    coordinator = _Child('scale_coordinator',
+                         [sys.executable, '-m', 'conveyor_twin.ros.split'] + process_args, env,
+                         read_stdout=True)
+    done = threading.Event()  # set once the coordinator ended: the others are stopped now
+    watcher = threading.Thread(target=_watch, args=(scales, coordinator, health, done),
+                               name='conveyor_twin_watch', daemon=True)
+    watcher.start()
     summary = None
 
     def read_until_eof() -> None:
         nonlocal summary
-        for line in coordinator.stdout:
+        for line in coordinator.proc.stdout:
             if line.startswith(SUMMARY_PREFIX):
                 summary = json.loads(line[len(SUMMARY_PREFIX):])
             elif not args.quiet:
@@ -207,24 +298,38 @@ def run_split(args: argparse.Namespace) -> int:
             read_until_eof()
         except KeyboardInterrupt:
             # the coordinator stops on SIGINT and prints its summary: keep reading it
-            coordinator.send_signal(signal.SIGINT)
+            coordinator.proc.send_signal(signal.SIGINT)
             read_until_eof()
-        code = coordinator.wait(30)
+        code = coordinator.proc.wait(30)
     finally:
-        for proc in scales:
-            proc.send_signal(signal.SIGINT)
+        done.set()
+        watcher.join(5.0)
+        for child in scales:
+            if child.proc.poll() is None:
+                child.proc.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + 10.0
-        for proc in scales:
+        for child in scales:
             try:
-                proc.wait(max(0.1, deadline - time.monotonic()))
+                child.proc.wait(max(0.1, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+                child.proc.kill()
+                child.proc.wait()
+    for child in scales:  # a thread of it failed while it stopped
+        if child.proc.returncode == EXIT_BACKGROUND_FAILURE:
+            child.report(health, 'after a failure of one of its threads')
     if summary is None:
+        coordinator.report(health, 'without a summary')
         print('the coordinator process ended without a summary', file=sys.stderr)
-        return code or 1
+        return EXIT_BACKGROUND_FAILURE
     summary['layout'] = 'split'
+    if health.failed:  # the processes seen here (with exit codes), then the coordinator's
+        seen = health.summary()
+        known = {f['name'] for f in seen}
+        summary['failures'] = seen + [f for f in summary.get('failures', ())
+                                      if f['name'] not in known]
     _print_summary(summary, args.json)
+    if summary.get('failures'):
+        return _failure_exit(summary)
     return code
 
 

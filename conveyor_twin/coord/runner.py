@@ -10,7 +10,7 @@ import os
 import sys
 import threading
 import time
-from typing import Callable, Optional
+from typing import Callable, Iterable, Optional, Set
 
 from conveyor_twin.coord.timing import DeadlinePacer, StepStats, TimeMode
 from conveyor_twin.coord.twin import Twin
@@ -24,6 +24,8 @@ REALTIME_SWITCH_INTERVAL = 2e-4
 # environment variable below.
 REALTIME_PRIORITY = 10
 PRIORITY_ENV = 'CONVEYOR_TWIN_RT_PRIORITY'
+#: Name under which a failed step of the stepping thread is reported to the twin's health.
+STEPPING_THREAD = 'stepping thread'
 
 
 def realtime_priority(helper: bool = False) -> int:
@@ -62,6 +64,37 @@ def raise_thread_priority(priority: int) -> int:
     return priority
 
 
+def thread_ids() -> Set[int]:
+    """Return the ids of this process's threads (empty where ``/proc`` is missing)."""
+    try:
+        return {int(tid) for tid in os.listdir('/proc/self/task')}
+    except OSError:
+        return set()
+
+
+def raise_threads(tids: Iterable[int], priority: int) -> int:
+    """Put every thread of ``tids`` that runs under normal scheduling under SCHED_FIFO at
+    ``priority``; return how many were raised.
+
+    For the threads a realtime twin starts besides its stepping thread (the middleware's, a
+    viewer's): a normally scheduled thread that another process preempts while it holds the
+    interpreter lock, or a middleware lock a publish waits for, stalls the step for a
+    scheduler time slice; and a step that had to hand the interpreter lock over waits until
+    the thread that asked for it gets a CPU. Threads they start later inherit the priority.
+    """
+    if priority <= 0 or not hasattr(os, 'sched_setscheduler'):
+        return 0
+    raised = 0
+    for tid in tids:
+        try:
+            if os.sched_getscheduler(tid) == os.SCHED_OTHER:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+                raised += 1
+        except OSError:  # the thread ended meanwhile, or no permission
+            continue
+    return raised
+
+
 class Runner:
     """Advance a :class:`Twin` according to a :class:`TimeMode`.
 
@@ -69,6 +102,7 @@ class Runner:
     :param mode: realtime, fast or lockstep.
     :param max_steps: stop after this many steps (None: until :meth:`stop`).
     :param on_error: called with the exception if a step raises; the thread then stops.
+        The exception is first reported to ``twin.health`` as :data:`STEPPING_THREAD`.
     """
 
     def __init__(self, twin: Twin, mode: TimeMode, *, max_steps: Optional[int] = None,
@@ -136,6 +170,7 @@ class Runner:
                     self.pacer.wait_next()
         except BaseException as exc:  # reported, never swallowed silently
             self.error = exc
+            self.twin.health.report(STEPPING_THREAD, exc)
             if self._on_error is not None:
                 self._on_error(exc)
         finally:
@@ -156,6 +191,11 @@ class Runner:
             return True
         self._thread.join(timeout)
         return not self._thread.is_alive()
+
+    def request_stop(self) -> None:
+        """Ask the stepping thread to stop after the current step; do not wait (e.g. from a
+        signal handler)."""
+        self._stop.set()
 
     def stop(self) -> None:
         """Stop the stepping thread after the current step."""

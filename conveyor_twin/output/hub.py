@@ -13,6 +13,7 @@ from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 
 from conveyor_twin.contract import Topic
 from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.health import Health
 from conveyor_twin.output.frame import Frame, FrameSink
 from conveyor_twin.output.producers import FrameProducer
 
@@ -40,6 +41,9 @@ class TwinOutput:
         self._on_message: Tuple[Callable[[Topic, int, bytes], None], ...] = ()
         #: Streams silenced by ``stream_outage`` faults: fault id -> (frame attribute, empty).
         self.outages: Dict[int, Tuple[str, Any]] = {}
+        #: The health of the twin whose frames this is (set by whoever attaches the output to
+        #: a twin): a sink with a thread of its own reports its failure there.
+        self.health: Optional[Health] = None
 
     def _outages(self, inp: StepInput) -> None:
         """Take the step's ``stream_outage`` events."""

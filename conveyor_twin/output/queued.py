@@ -10,6 +10,7 @@ import threading
 from typing import Callable, Deque, Optional, Tuple
 
 from conveyor_twin.contract import Topic
+from conveyor_twin.health import Health
 from conveyor_twin.output.frame import Frame
 
 #: Default bound of the queue [frames or messages].
@@ -24,12 +25,17 @@ class QueuedSink:
         (``markers``); None: such messages are ignored.
     :param queue_size: bound of the queue; beyond it frames are dropped and counted in
         :attr:`dropped`.
-    :param name: name of the worker thread.
+    :param name: name of the worker thread, and of the sink in a failure report.
+    :param health: where the consumer's exception is reported (the twin's
+        :attr:`~conveyor_twin.coord.twin.Twin.health`, e.g. ``output.health``); None: a health
+        of the sink's own, which still prints the report once. After an exception the sink
+        stops consuming, keeps it in :attr:`error` and drops (and counts) later frames.
     """
 
     def __init__(self, on_frame: Callable[[Frame], None], *,
                  on_message: Optional[Callable[[Topic, int, bytes], None]] = None,
-                 queue_size: int = DEFAULT_QUEUE_SIZE, name: str = 'conveyor_twin_sink') -> None:
+                 queue_size: int = DEFAULT_QUEUE_SIZE, name: str = 'conveyor_twin_sink',
+                 health: Optional[Health] = None) -> None:
         if queue_size < 1:
             raise ValueError(f'queue_size {queue_size}: expected >= 1')
         self._consume_frame = on_frame
@@ -41,6 +47,8 @@ class QueuedSink:
         self._wake = threading.Condition()
         self._closed = False
         self.error: Optional[BaseException] = None
+        self.name = name
+        self.health = health if health is not None else Health()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
@@ -76,10 +84,11 @@ class QueuedSink:
                 else:
                     self._consume_message(*message)
                 self.delivered += 1
-            except BaseException as exc:  # noqa: B902 - kept for the owner, never the step's
+            except BaseException as exc:  # noqa: B902 - reported, never the step's
                 self.error = exc
                 self._closed = True
                 self._queue.clear()
+                self.health.report(self.name, exc)
                 return
 
     def close(self, timeout: float = 5.0) -> None:

@@ -46,6 +46,7 @@ from . import qos as qos_mod
 from ._mcapfile import McapFile
 from .errors import RecordingError
 from .. import __version__
+from ..health import Health
 from ..wire.schemas import SCHEMAS
 from ..wire.typehash import type_hash
 
@@ -77,6 +78,8 @@ FORCED_FLUSH_SHARE = 0.8
 #: rosbag2 metadata version written into the ``rosbag2`` metadata record.
 ROSBAG2_METADATA_VERSION = 9
 ROS_DISTRO = 'kilted'
+#: Name under which a failed writer is reported to the twin's health.
+WRITER_NAME = 'recorder writer'
 LIBRARY = f'conveyor_twin/{__version__} (conveyor_twin.record, rosbag2 MCAP layout)'
 
 _COMPRESSIONS = {'lz4': 'lz4', 'zstd': 'zstd', 'none': '', '': ''}
@@ -146,7 +149,8 @@ class McapRecorder:
                  cell_yaml: Optional[str] = None, seed: Optional[int] = None,
                  step_ns: Optional[int] = None,
                  metadata: Optional[Mapping[str, str]] = None,
-                 on_thread_start: Optional[Callable[[], Any]] = None) -> None:
+                 on_thread_start: Optional[Callable[[], Any]] = None,
+                 health: Optional[Health] = None) -> None:
         """Open the file, write header, metadata and attachments, and start the writer thread.
 
         :param path: output file (``.mcap``); overwritten if it exists.
@@ -163,6 +167,9 @@ class McapRecorder:
         :param metadata: further key/value pairs of the ``conveyor_twin`` metadata record.
         :param on_thread_start: called first in the writer thread (e.g. to raise its scheduling
             priority, so that a busy machine cannot delay the timed flush).
+        :param health: where a failure of the writer is reported at once, with its traceback,
+            as :data:`WRITER_NAME` (the twin's health); None: a health of the recorder's own,
+            which prints the report. :meth:`close` raises it too.
         :raises RecordingError: if the file cannot be created or an option is invalid.
         """
         if compression not in _COMPRESSIONS:
@@ -202,6 +209,7 @@ class McapRecorder:
         self._by_index: List[_Topic] = []
         self.stats = RecorderStats(self.path)
         self._on_thread_start = on_thread_start
+        self.health = health if health is not None else Health()
         self._info = {'version': __version__, 'library': LIBRARY,
                       'seed': '' if seed is None else str(int(seed)),
                       'step_ns': '' if step_ns is None else str(int(step_ns)),
@@ -297,7 +305,8 @@ class McapRecorder:
         """Drain and flush from the producer's thread: the writer thread is behind.
 
         Waits for a drain of the writer thread in progress; does nothing once the recorder
-        failed or is closing (errors are reported by :meth:`close`).
+        failed or is closing (an error is reported to :attr:`health` at once and raised by
+        :meth:`close`).
         """
         if self._error is not None or self._closing:
             return
@@ -308,7 +317,7 @@ class McapRecorder:
             try:
                 self._flush_queued()
                 self.stats.forced_flushes += 1
-            except BaseException as err:  # noqa: BLE001 - reported by close()
+            except BaseException as err:  # noqa: BLE001 - reported now, raised by close()
                 self._fail(err)
 
     def record_accepted_command(self, kind: str, effective_time_ns: int, data: bytes) -> None:
@@ -384,7 +393,7 @@ class McapRecorder:
                 if closing and not self._queue:
                     break
                 self._wake.wait(min(POLL_PERIOD, wait))
-        except BaseException as err:  # noqa: BLE001 - reported by close()
+        except BaseException as err:  # noqa: BLE001 - reported now, raised by close()
             self._fail(err)
 
     def _flush_queued(self) -> None:
@@ -395,10 +404,12 @@ class McapRecorder:
         self._flushed_mark = mark
 
     def _fail(self, err: BaseException) -> None:
-        """Keep the writer's error for :meth:`close` and stop queueing work for it."""
+        """Report the writer's error to :attr:`health` (once, with its traceback), keep it for
+        :meth:`close` and stop queueing work for it."""
         self._error = err
         self.stats.error = f'{type(err).__name__}: {err}'
         self._queue.clear()
+        self.health.report(WRITER_NAME, err)
 
     # -- closing ------------------------------------------------------------------------------
     def close(self) -> RecorderStats:
@@ -422,6 +433,7 @@ class McapRecorder:
                 self._file.finish()
         except Exception as err:  # noqa: BLE001
             self._error = err
+            self.health.report(WRITER_NAME, err)
         finally:
             self._stream.close()
         if self._error is not None:

@@ -3,6 +3,7 @@
 The coordinator steps the stages in memory (no per-step ROS traffic between the nodes); each
 node publishes its own streams after every step. An executor thread serves commands and
 services; the stepping thread (realtime/fast) is the coordinator core's :class:`Runner`.
+Every thread of the twin reports its failure to :attr:`ComposedTwin.health` (the twin's).
 """
 
 import os
@@ -13,9 +14,11 @@ from rclpy.context import Context
 
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.assembly import build_twin
-from conveyor_twin.coord.runner import raise_thread_priority, realtime_priority, Runner
+from conveyor_twin.coord.runner import (raise_thread_priority, raise_threads,
+                                        realtime_priority, Runner, thread_ids)
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.faults.scenario import Scenario
+from conveyor_twin.health import Health
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.producers import CoordinatorOutput, MacroOutput, MicroOutput
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
@@ -26,6 +29,10 @@ from conveyor_twin.ros.micro_node import MicroNode
 from conveyor_twin.ros.params import parameter_overrides
 from conveyor_twin.ros.qos import publish_failures
 from conveyor_twin.viz.foxglove_view import DEFAULT_STREAM_RATE, FoxgloveView
+
+
+#: Name of the executor thread (and of its failure in the twin's health).
+EXECUTOR = 'executor thread'
 
 
 class ComposedTwin:
@@ -50,11 +57,16 @@ class ComposedTwin:
                  scenario: Optional[Scenario] = None) -> None:
         self.cell = cell
         self.context = context
+        self._foreign_threads = thread_ids()  # those this twin does not start
         self.assembled = build_twin(cell, seed=seed, layout='composed')
         self.micro_stage = self.assembled.micro
         self.macro_stage = self.assembled.macro
         self.twin = self.assembled.twin
-        self.runner = Runner(self.twin, mode, max_steps=max_steps, on_error=self._on_error)
+        #: The twin's health: every thread of this twin (stepping, executor, markers, recorder
+        #: writer, Foxglove view, queued sinks) reports its failure here.
+        self.health: Health = self.twin.health
+        # a failing step is reported to the health (logged at ERROR by the coordinator node)
+        self.runner = Runner(self.twin, mode, max_steps=max_steps)
         #: The armed fault scenario (None without one).
         self.scenario = (self.assembled.arm_scenario(scenario) if scenario is not None
                          else None)
@@ -68,9 +80,10 @@ class ComposedTwin:
             CoordinatorOutput(self.twin,
                               diagnostics=lambda t: self.coordinator.diagnostics_cdr(t)),
             MicroOutput(self.micro_stage), MacroOutput(self.macro_stage)])
+        self.output.health = self.health
         common = dict(context=context, namespace=namespace, markers_rate=markers_rate,
                       step_s=cell.settings.step, parameter_overrides=overrides,
-                      output=self.output)
+                      output=self.output, health=self.health)
         self.coordinator = CoordinatorNode(self.twin, self.runner, context=context,
                                            namespace=namespace, spawn=self.assembled.spawn,
                                            counters=self.counters,
@@ -85,6 +98,7 @@ class ComposedTwin:
             self.executor.add_node(node)
         self._spin_thread: Optional[threading.Thread] = None
         self._stop_spin = threading.Event()
+        self._final_diagnostics = False  # the ERROR diagnostics after a failure was published
         #: The live Foxglove view (None without ``foxglove``).
         self.foxglove: Optional[FoxgloveView] = None
         if foxglove:
@@ -93,9 +107,6 @@ class ComposedTwin:
             except BaseException:
                 self.stop()
                 raise
-
-    def _on_error(self, exc: BaseException) -> None:
-        self.coordinator.get_logger().error(f'simulation stopped: {exc!r}')
 
     def counters(self) -> Dict[str, float]:
         """Part balance per scale: entered, left through sinks, in flight."""
@@ -112,15 +123,31 @@ class ComposedTwin:
         spin_until(self.executor, self._stop_spin)
 
     def start(self) -> None:
-        """Start serving ROS callbacks and, in realtime/fast mode, stepping."""
-        self._spin_thread = threading.Thread(target=self._spin, name='conveyor_twin_executor',
-                                             daemon=True)
+        """Start serving ROS callbacks and, in realtime/fast mode, stepping.
+
+        In realtime every thread this twin started (the middleware's, the Foxglove view's)
+        gets the helper priority first (:func:`~conveyor_twin.coord.runner.raise_threads`).
+        """
+        if self.runner.mode is TimeMode.REALTIME:
+            raise_threads(thread_ids() - self._foreign_threads, realtime_priority(helper=True))
+        self._spin_thread = threading.Thread(target=self.health.guard(EXECUTOR, self._spin),
+                                             name='conveyor_twin_executor', daemon=True)
         self._spin_thread.start()
         self.runner.start()
 
     def stop(self) -> None:
-        """Stop stepping, then stop serving callbacks and destroy the nodes."""
+        """Stop stepping, then stop serving callbacks and destroy the nodes.
+
+        After a failure of one of its threads the coordinator first publishes a diagnostics
+        message with the ERROR status naming it (and hands it to the sinks, e.g. a recorder).
+        """
         self.runner.stop()
+        if self.health.failed and not self._final_diagnostics:
+            self._final_diagnostics = True
+            try:
+                self.coordinator.publish_diagnostics()
+            except Exception as exc:  # noqa: BLE001 - e.g. the context already shut down
+                self.health.report('final diagnostics', exc)
         self._stop_spin.set()
         if self._spin_thread is not None:
             self._spin_thread.join(5.0)

@@ -16,8 +16,8 @@ from conveyor_twin_msgs.msg import ActuatorCommand, BeltCommand
 from conveyor_twin_msgs.srv import ClearFault, InjectFault, Reset, SpawnParts, Step
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
+from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.serialization import serialize_message
 from std_msgs.msg import UInt8MultiArray
 
 from conveyor_twin import contract
@@ -27,10 +27,13 @@ from conveyor_twin.coord.commands import Command, CommandRejected
 from conveyor_twin.coord.requests import (check_reset, check_spawn, RequestRejected,
                                           reset_message, SpawnRequest)
 from conveyor_twin.coord.runner import Runner
+from conveyor_twin.coord.stages import MicroStage
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.coord.twin import Twin
-from conveyor_twin.faults.model import ActiveFault, FaultRejected, FaultSpec
+from conveyor_twin.faults.material import holds_part
+from conveyor_twin.faults.model import ActiveFault, FaultRejected, FaultSpec, no_such_part
+from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Failure, process_alive
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.producers import CoordinatorOutput
 from conveyor_twin.ros import coupling
@@ -38,6 +41,7 @@ from conveyor_twin.ros.endpoints import create_publisher, create_service, create
 from conveyor_twin.ros.params import declare_twin_parameters
 from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures
 from conveyor_twin.ros.stream_publisher import StreamPublisher
+from conveyor_twin.wire.diagnostics import encode_diagnostic_array, ERROR, OK, Status, WARN
 
 #: The streams this node publishes from the frames.
 STREAMS = (contract.CLOCK, contract.BELT_STATES, contract.ACTUATOR_STATES, contract.DIAGNOSTICS,
@@ -46,6 +50,12 @@ STREAMS = (contract.CLOCK, contract.BELT_STATES, contract.ACTUATOR_STATES, contr
 REMOTE_STEP_TIMEOUT = 10.0        # s a split scale node may take to report a step done
 COUNTERS_TIMEOUT = 2.0            # s the split scale nodes may take to send their counters
 LOG_THROTTLE = 1.0                # s between two logged rejections
+LIVENESS_PERIOD = 0.25            # s between checks that a silent scale node's process lives
+FINAL_DIAGNOSTICS_ACK = 2.0       # s the diagnostics after a failure may wait to be acked
+#: Name of the diagnostics status of the twin's background threads and processes.
+HEALTH_STATUS = 'conveyor_twin: health'
+#: Node name of each split scale role.
+ROLE_NODES = {codec.MICRO_ROLE: 'micro_simulator', codec.MACRO_ROLE: 'macro_simulator'}
 
 
 class CoordinatorNode(Node):
@@ -60,6 +70,8 @@ class CoordinatorNode(Node):
     :param output: the twin's output whose frames this node publishes (composed: shared by the
         three nodes, attached to the twin by the assembly); None: the node makes the output of
         the coordinator's streams and attaches it to ``twin`` (split layout).
+    :param scale_pids: split layout: the process id of each scale role, if known (a reply
+        that does not come then says whether that process still lives).
     """
 
     def __init__(self, twin: Twin, runner: Runner, *, context=None,
@@ -67,7 +79,8 @@ class CoordinatorNode(Node):
                  remote_roles: tuple = (),
                  spawn: Optional[Callable[[SpawnRequest], np.ndarray]] = None,
                  counters: Optional[Callable[[], Dict[str, float]]] = None,
-                 parameter_overrides=None, output: Optional[TwinOutput] = None) -> None:
+                 parameter_overrides=None, output: Optional[TwinOutput] = None,
+                 scale_pids: Optional[Dict[int, int]] = None) -> None:
         super().__init__('scale_coordinator', context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
         self.twin = twin
@@ -95,6 +108,8 @@ class CoordinatorNode(Node):
         create_service(self, contract.CLEAR_FAULT, self._on_clear_fault)
         twin.step_listeners.append(self._log_faults)
         self._remote_roles = tuple(remote_roles)
+        self.scale_pids: Dict[int, int] = dict(scale_pids or {})
+        twin.health.listeners.append(self._log_failure)
         #: The scale nodes send measures for a scenario's triggers with every step reply.
         self.measures_wanted = False
         self._measures: Dict[int, bytes] = {}
@@ -122,16 +137,29 @@ class CoordinatorNode(Node):
         if output is None:
             output = TwinOutput([CoordinatorOutput(twin, diagnostics=self.diagnostics_cdr)])
             twin.step_listeners.append(output.on_step)
+            output.health = twin.health
         self.output = output
         output.subscribe(self.streams)
 
     # -- per step ------------------------------------------------------------------------
     def diagnostics_cdr(self, time_ns: int) -> bytes:
-        """Return :meth:`diagnostics` as CDR bytes (the frame's ``diagnostics``)."""
-        return serialize_message(self.diagnostics(time_ns))
+        """Return :meth:`diagnostics` as CDR bytes (the frame's ``diagnostics``), written from
+        the statuses' strings without message objects (it runs on the stepping thread)."""
+        return encode_diagnostic_array(time_ns, self._frame, self._statuses())
 
     def diagnostics(self, time_ns: int) -> DiagnosticArray:
         """Return step-time statistics, overruns, real-time factor, rejections, part balance."""
+        msg = DiagnosticArray(status=[s if isinstance(s, DiagnosticStatus) else DiagnosticStatus(
+            level=bytes([s.level]), name=s.name, message=s.message, hardware_id=s.hardware_id,
+            values=[KeyValue(key=k, value=v) for k, v in s.values]) for s in self._statuses()])
+        sec, nanosec = stamp(time_ns)
+        msg.header.stamp = Time(sec=sec, nanosec=nanosec)
+        msg.header.frame_id = self._frame
+        return msg
+
+    def _statuses(self) -> list:
+        """The coordinator's status (a :class:`~conveyor_twin.wire.diagnostics.Status`), the
+        faults' and the health's."""
         window = self.runner.stats.window()
         values = {
             'step': str(self.twin.step_index),
@@ -149,17 +177,11 @@ class CoordinatorNode(Node):
         values['publish_failures'] = str(self.publish_failures(counters))
         values.update({k: f'{v:g}' if isinstance(v, float) else str(v)
                        for k, v in counters.items()})
-        status = DiagnosticStatus(
-            level=DiagnosticStatus.WARN if self.runner.overruns else DiagnosticStatus.OK,
-            name='conveyor_twin: scale_coordinator', hardware_id=self.twin.cell.settings.name,
-            message=(f'{self.runner.overruns} overruns' if self.runner.overruns
-                     else 'running in time'),
-            values=[KeyValue(key=k, value=v) for k, v in values.items()])
-        sec, nanosec = stamp(time_ns)
-        msg = DiagnosticArray(status=[status, self._fault_status()])
-        msg.header.stamp = Time(sec=sec, nanosec=nanosec)
-        msg.header.frame_id = self._frame
-        return msg
+        status = Status(
+            WARN if self.runner.overruns else OK, 'conveyor_twin: scale_coordinator',
+            f'{self.runner.overruns} overruns' if self.runner.overruns else 'running in time',
+            self.twin.cell.settings.name, list(values.items()))
+        return [status, self._fault_status(), self._health_status()]
 
     def _fault_status(self) -> DiagnosticStatus:
         """The faults' status: WARN naming every active fault, OK with none."""
@@ -176,6 +198,33 @@ class CoordinatorNode(Node):
             message=(f'{len(active)} active: ' + ', '.join(_describe(f) for f in active)
                      if active else 'no active fault'),
             values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+    def _health_status(self) -> Status:
+        """The background threads' and processes' status: OK, or ERROR naming each failure
+        (one value per failure: name, error)."""
+        health = self.twin.health
+        if not health.failed:  # a plain attribute: nothing to lock while all is well
+            return Status(OK, HEALTH_STATUS, health.status()[1], self.twin.cell.settings.name,
+                          [('failures', '0')])
+        failures = health.failures
+        return Status(ERROR, HEALTH_STATUS, health.status()[1], self.twin.cell.settings.name,
+                      [('failures', str(len(failures)))] + [(f.name, f.error) for f in failures])
+
+    def _log_failure(self, failure: Failure) -> None:
+        """Log a failure of a background thread or process once, at ERROR."""
+        self.get_logger().error(f'{failure.describe()}; the run stops and exits with code '
+                                f'{EXIT_BACKGROUND_FAILURE}')
+
+    def publish_diagnostics(self, ack_timeout: float = FINAL_DIAGNOSTICS_ACK) -> bytes:
+        """Publish the diagnostics now, off the step (after a failure: the ERROR status), hand
+        them to the output's sinks (a recorder) and wait up to ``ack_timeout`` [s] until reliable
+        subscribers acknowledged them. Call with the stepping stopped; return the CDR bytes."""
+        time_ns = self.twin.time_ns
+        data = self.diagnostics_cdr(time_ns)
+        self.diag_pub.publish(data)
+        self.output.emit(contract.DIAGNOSTICS, data, time_ns)
+        self.diag_pub.wait_for_all_acked(Duration(nanoseconds=int(ack_timeout * 1e9)))
+        return data
 
     def _log_faults(self, inp: StepInput, commands: List[Command]) -> None:
         """Log every fault injected or cleared (WARN), as it takes effect."""
@@ -207,16 +256,41 @@ class CoordinatorNode(Node):
         with self._done_cv:
             while any(self._done[r] <= counts[r] for r in counts):
                 remaining = deadline - time.monotonic()
+                missing = [r for r in counts if self._done[r] <= counts[r]]
                 if remaining <= 0 or not self.context.ok():
-                    missing = [r for r in counts if self._done[r] <= counts[r]]
-                    raise TimeoutError(f'scale nodes {missing} did not answer for step {step} '
-                                       f'within {timeout:g} s')
-                self._done_cv.wait(remaining)
+                    raise TimeoutError(f'{self._describe_silent(missing)} did not answer for '
+                                       f'step {step} within {timeout:g} s')
+                if not self._done_cv.wait(min(remaining, LIVENESS_PERIOD)):
+                    gone = [r for r in missing
+                            if r in self.scale_pids and not process_alive(self.scale_pids[r])]
+                    if gone:  # no use waiting for a process that has ended
+                        raise ScaleNodeLost(f'{self._describe_silent(gone)} did not answer '
+                                            f'for step {step}')
             wrong = {r: v[0] for r, v in self._replies.items() if v[0] != step}
             if wrong:
                 raise RuntimeError(f'scale nodes answered for other steps {wrong}, '
                                    f'expected {step}: the layout lost lockstep')
             return {r: v[1] for r, v in self._replies.items()}
+
+    def _describe_silent(self, roles: List[int]) -> str:
+        """Name each scale node of ``roles`` and say whether its process lives (by its process
+        id if known, else whether the node is in the ROS graph)."""
+        try:
+            graph = {name for name, _ in self.get_node_names_and_namespaces()}
+        except Exception:  # noqa: BLE001 - a context shutting down has no graph
+            graph = set()
+        out = []
+        for role in roles:
+            name = ROLE_NODES.get(role, f'scale role {role}')
+            pid = self.scale_pids.get(role)
+            if pid is not None:
+                state = ('its process (pid %d) is alive' if process_alive(pid)
+                         else 'its process (pid %d) has exited') % pid
+            else:
+                state = ('its node is in the ROS graph' if name in graph
+                         else 'its node is not in the ROS graph')
+            out.append(f'{name} ({state})')
+        return ', '.join(out)
 
     def _step_remote(self, inp: StepInput, commands: List[Command]) -> None:
         replies = self._send_and_wait(codec.step_payload(inp), inp.step)
@@ -250,7 +324,7 @@ class CoordinatorNode(Node):
             try:
                 self._step_replies = self._send_and_wait(
                     codec.COUNTERS, self.twin.step_index, COUNTERS_TIMEOUT)
-            except (TimeoutError, RuntimeError) as exc:
+            except (TimeoutError, RuntimeError) as exc:  # ScaleNodeLost is a RuntimeError
                 self.get_logger().warning(f'scale node counters unavailable: {exc}')
                 return self._step_replies
             self._replies_fresh = True
@@ -293,35 +367,39 @@ class CoordinatorNode(Node):
             self.get_logger().warning(
                 f'{exc} (rejected, not applied; {self.twin.commands.rejected_total} so far)')
 
-    def _report(self, topic: str, target: str, value: float,
+    def _report(self, topic: str, msg: Any, target: str, value: float,
                 error: Optional[CommandRejected]) -> None:
         """Publish the outcome of one command on ``command_status`` (``step``: the step index
-        when it arrived; an accepted command takes effect at the next step)."""
+        when it arrived; an accepted command takes effect at the next step; ``sender`` and
+        ``sequence``: as the command carried them, so its sender can tell its answers)."""
         step = self.twin.step_index
         status = DiagnosticStatus(
             level=DiagnosticStatus.ERROR if error else DiagnosticStatus.OK, name=topic,
             message=str(error) if error else 'accepted', hardware_id=target,
             values=[KeyValue(key='value', value=repr(float(value))),
-                    KeyValue(key='step', value=str(step))])
+                    KeyValue(key='step', value=str(step)),
+                    KeyValue(key='sender', value=msg.sender),
+                    KeyValue(key='sequence', value=str(msg.sequence))])
         self.command_status_pub.publish(status)
 
     def _on_belt_command(self, msg: BeltCommand) -> None:
         error = None
         try:
-            self.twin.commands.submit_belt(msg.belt, msg.speed)
+            self.twin.commands.submit_belt(msg.belt, msg.speed, msg.sender, msg.sequence)
         except CommandRejected as exc:
             error = exc
             self._rejected(exc)
-        self._report('belt_command', msg.belt, msg.speed, error)
+        self._report('belt_command', msg, msg.belt, msg.speed, error)
 
     def _on_actuator_command(self, msg: ActuatorCommand) -> None:
         error = None
         try:
-            self.twin.commands.submit_actuator(msg.actuator, msg.position)
+            self.twin.commands.submit_actuator(msg.actuator, msg.position, msg.sender,
+                                               msg.sequence)
         except CommandRejected as exc:
             error = exc
             self._rejected(exc)
-        self._report('actuator_command', msg.actuator, msg.position, error)
+        self._report('actuator_command', msg, msg.actuator, msg.position, error)
 
     # -- services ------------------------------------------------------------------------
     def _on_step(self, request: Step.Request, response: Step.Response) -> Step.Response:
@@ -384,9 +462,11 @@ class CoordinatorNode(Node):
             if len(names) != len(values):
                 raise self.twin.faults.reject(
                     f'{len(names)} param_names but {len(values)} param_values')
-            fault = self.twin.faults.inject(FaultSpec(
-                request.kind, request.target, dict(zip(names, values)),
-                float(request.duration), request.part_type))
+            spec = FaultSpec(request.kind, request.target, dict(zip(names, values)),
+                             float(request.duration), request.part_type)
+            with self.twin.lock:
+                self._check_part_jam(self.twin.faults.validate(spec))
+                fault = self.twin.faults.inject(spec)
         except FaultRejected as exc:
             response.success, response.message = False, f'rejected, nothing changed: {exc}'
             self.get_logger().warning(f'inject_fault {response.message}')
@@ -394,6 +474,26 @@ class CoordinatorNode(Node):
         response.success, response.id = True, fault.id
         response.message = f'fault {fault.id} takes effect at the next step'
         return response
+
+    def _check_part_jam(self, fault: ActiveFault) -> None:
+        """Reject a ``part_jam`` on a part id the micro scale does not hold now: composed, the
+        micro stage of this process says; split, the micro node answers a part query over the
+        coupling (as for a spawn)."""
+        if fault.kind != 'part_jam' or fault.index < 0:
+            return
+        if self._remote_roles:
+            try:
+                replies = self._send_and_wait(codec.part_query_payload(fault.index),
+                                              self.twin.step_index)
+            except (TimeoutError, RuntimeError) as exc:
+                raise self.twin.faults.reject(f"fault 'part_jam': the micro node did not say "
+                                              f'whether part {fault.index} exists: {exc}')
+            exists = replies.get(codec.MICRO_ROLE, b'') == b'Y'
+        else:
+            stages = [s for s in self.twin.stages if isinstance(s, MicroStage)]
+            exists = any(holds_part(s.sim, fault.index) for s in stages)
+        if not exists:
+            raise self.twin.faults.reject(str(no_such_part(fault.index)))
 
     def _on_clear_fault(self, request: ClearFault.Request,
                         response: ClearFault.Response) -> ClearFault.Response:
@@ -432,7 +532,13 @@ class CoordinatorNode(Node):
             'rejected_commands': self.twin.commands.rejected_total,
             'publish_failures': self.publish_failures(counters),
             **counters,
+            # what failed in the background (only after a failure: the run then exits non-zero)
+            **({'failures': self.twin.health.summary()} if self.twin.health.failed else {}),
         }
+
+
+class ScaleNodeLost(RuntimeError):
+    """A split scale node's process ended while the coordinator waited for its reply."""
 
 
 def _describe(fault: ActiveFault) -> str:

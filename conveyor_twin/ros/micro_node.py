@@ -18,6 +18,7 @@ from conveyor_twin.coord.mirror import MicroSide
 from conveyor_twin.coord.runner import raise_thread_priority
 from conveyor_twin.coord.stages import MicroStage
 from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.faults.material import holds_part
 from conveyor_twin.output.frame import Frame
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.markers import CellMarkers
@@ -31,6 +32,8 @@ from conveyor_twin.ros.stream_publisher import StreamPublisher
 
 #: The streams this node publishes from the frames (markers it builds itself).
 STREAMS = (contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES)
+#: Name of the markers thread (and of its failure in the twin's health).
+MARKERS_THREAD = 'markers thread'
 
 
 class MicroNode(ScaleNode):
@@ -64,9 +67,10 @@ class MicroNode(ScaleNode):
         self._markers_closed = False
         self._markers_wake = threading.Event()
         self._markers_thread = None
-        if self.markers_every:
-            self._markers_thread = threading.Thread(target=self._markers_loop,
-                                                    name='conveyor_twin_markers', daemon=True)
+        if self.markers_every:  # its exception is reported to the health, once
+            self._markers_thread = threading.Thread(
+                target=self.health.guard(MARKERS_THREAD, self._markers_loop),
+                name='conveyor_twin_markers', daemon=True)
             self._markers_thread.start()
         self._side = side  # the scale hand-over's micro half (split layout, coupled cells)
         if self.remote and side is not None:
@@ -140,6 +144,10 @@ class MicroNode(ScaleNode):
         except ValueError as exc:
             return codec.spawn_error(str(exc))
         return codec.spawn_reply(ids)
+
+    def part_reply(self, body: bytes) -> bytes:
+        """Answer whether the micro scale holds a part of the queried id now (``part_jam``)."""
+        return codec.part_reply(holds_part(self.stage.sim, codec.parse_part_query(body)))
 
 
 def main(argv: Optional[List[str]] = None) -> int:

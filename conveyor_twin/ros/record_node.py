@@ -29,6 +29,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health
 from conveyor_twin.record import topics as contract
 from conveyor_twin.record.errors import RecordingError
 from conveyor_twin.record.writer import McapRecorder
@@ -276,7 +277,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    """Record until the duration ends or SIGINT/SIGTERM; print the summary; return 0 or 1."""
+    """Record until the duration ends, SIGINT/SIGTERM or a failure of the writer thread; print
+    the summary; return 0, 1 if the file cannot be created, 2 for bad options, or
+    :data:`~conveyor_twin.health.EXIT_BACKGROUND_FAILURE` if the writer failed (reported at
+    once with its traceback)."""
     args = build_parser().parse_args(argv)
     try:
         specs = contract.select(args.topics, markers=args.markers)
@@ -296,8 +300,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     context = Context()
     rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    health = Health()
     try:
-        recorder = McapRecorder(args.output, compression=args.compression,
+        recorder = McapRecorder(args.output, compression=args.compression, health=health,
                                 flush_period=args.flush_period, queue_size=args.queue_size,
                                 decimation=decimation,
                                 metadata={'recorded_by': 'conveyor-twin record',
@@ -316,7 +321,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     def tick() -> None:
         node.tick()
         over = args.duration > 0 and time.monotonic() - start >= args.duration
-        if (stop['signal'] or over) and not done.done():
+        if (stop['signal'] or over or health.failed) and not done.done():
             done.set_result(True)
 
     timer = node.create_timer(TICK_PERIOD, tick)
@@ -333,9 +338,9 @@ def main(argv: Optional[List[str]] = None) -> int:
             node.destroy_subscription(node._subs.pop(topic))
         try:
             stats = recorder.close()
-        except RecordingError as err:
+        except RecordingError as err:  # the writer failed: reported when it did
             print(f'conveyor-twin record: {err}', file=sys.stderr)
-            stats, code = recorder.stats, 1
+            stats, code = recorder.stats, EXIT_BACKGROUND_FAILURE
         wall = time.monotonic() - start
         executor.remove_node(node)
         node.destroy_node()

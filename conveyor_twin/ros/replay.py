@@ -38,6 +38,7 @@ from typing import Any, Deque, Dict, Iterator, List, Optional, Sequence, Tuple
 import numpy as np
 import yaml
 
+from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health
 from conveyor_twin.record import reader, topics as contract
 from conveyor_twin.record.errors import RecordingError
 from conveyor_twin.record.qos import default_qos, OfferedQos
@@ -52,6 +53,8 @@ ACCEPTED_PREFIX = '/conveyor_twin/accepted/'
 CLOCK_TOPIC = '/clock'
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 _NS_PER_S = 1_000_000_000
+#: Name of the read-ahead thread (and of its failure in the replayer's health).
+PREFETCH_THREAD = 'replay prefetch thread'
 
 
 def offered_from_yaml(text: str, type_name: str) -> OfferedQos:
@@ -230,11 +233,14 @@ class _Prefetch:
 
     The indexed reader stalls for tens of milliseconds whenever it loads a chunk; reading
     ahead (up to ``high`` messages, refilled from ``low``) keeps those stalls off the deadlines.
-    Items are ``(pass, log_time, topic, data)``; passes repeat with ``loop``; None ends.
+    Items are ``(pass, log_time, topic, data)``; passes repeat with ``loop``; None ends. An
+    exception of the reader is reported to ``health`` at once and re-raised by :meth:`get`.
     """
 
     def __init__(self, p: ReplayPlan, start_offset_ns: int, loop: bool, *,
-                 high: int = 20000, low: int = 10000) -> None:
+                 high: int = 20000, low: int = 10000,
+                 health: Optional[Health] = None) -> None:
+        self._health = health if health is not None else Health()
         self._plan, self._offset, self._loop = p, start_offset_ns, loop
         self._high, self._low = high, low
         self._items: Deque[Any] = deque()
@@ -266,6 +272,7 @@ class _Prefetch:
                 k += 1
         except BaseException as err:  # noqa: BLE001 - re-raised in the publisher's thread
             self.error = err
+            self._health.report(PREFETCH_THREAD, err)
         self._put(None)
 
     def get(self) -> Any:
@@ -313,6 +320,8 @@ class Replayer:
         self.spin_margin_ns = spin_margin_ns
         self.stats = ReplayStats()
         self.stopped = False
+        #: Where the read-ahead thread reports its failure.
+        self.health = Health()
         self.publishers = {topic: node.create_publisher(message_class(type_name), topic,
                                                         to_rclpy(offered))
                            for topic, (type_name, offered) in p.topics.items()}
@@ -371,7 +380,7 @@ class Replayer:
         first = last = 0
         switch = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL)  # the reader thread yields the GIL sooner
-        prefetch = _Prefetch(self.plan, self.start_offset_ns, self.loop)
+        prefetch = _Prefetch(self.plan, self.start_offset_ns, self.loop, health=self.health)
         try:
             while not self.stopped:
                 item = prefetch.get()
@@ -430,7 +439,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    """Replay a recording; return 0, or 1 if it cannot be read, 2 on bad options."""
+    """Replay a recording; return 0, or 1 if it cannot be read, 2 on bad options,
+    :data:`~conveyor_twin.health.EXIT_BACKGROUND_FAILURE` if the read-ahead thread failed
+    otherwise (reported with its traceback)."""
     args = build_parser().parse_args(argv)
     if not args.rate > 0 or args.start_offset < 0:
         print('conveyor-twin replay: --rate must be > 0 and --start-offset >= 0',
@@ -468,6 +479,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     except RecordingError as err:
         print(f'conveyor-twin replay: {err}', file=sys.stderr)
         stats, code = replayer.stats, 1
+    except Exception:  # noqa: BLE001 - the read-ahead thread's failure, reported there
+        if not replayer.health.failed:
+            raise
+        stats, code = replayer.stats, EXIT_BACKGROUND_FAILURE
     finally:
         if not replayer.wait_for_acks(args.linger):
             print('conveyor-twin replay: not every subscriber acknowledged the last messages '

@@ -153,7 +153,8 @@ def start_recording(composed: Any, args: argparse.Namespace, *, seed: int,
                   'markers_rate': repr(float(args.markers_rate)), 'mode': mode,
                   'cell_file': args.cell or '', 'commands': ' '.join(args.command),
                   **_scenario_metadata(composed)},
-        on_thread_start=_writer_priority if mode == 'realtime' else None)
+        on_thread_start=_writer_priority if mode == 'realtime' else None,
+        health=composed.twin.health)
     try:
         return TwinRecording(composed, recorder)
     except BaseException:

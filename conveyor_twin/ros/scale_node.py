@@ -10,6 +10,7 @@ from conveyor_twin.cell import load_cell
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord import codec
 from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.health import Health
 from conveyor_twin.ros import coupling
 from conveyor_twin.ros.params import declare_twin_parameters, DIAGNOSTICS_PERIOD_STEPS
 from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures, raw_publish
@@ -36,6 +37,8 @@ class ScaleNode(Node):
     :param reset: restarts the stage and whatever the assembly built with it (split layout;
         None: the stage's reset).
     :param markers_rate: MarkerArray rate [Hz]; 0 disables markers.
+    :param health: where the node's own threads report a failure (composed: the twin's; a
+        scale process: the process's); None: a health of the node's own.
     """
 
     def __init__(self, name: str, stage, role: int, *, context=None,
@@ -43,9 +46,10 @@ class ScaleNode(Node):
                  counters: Optional[Callable[[], Dict[str, float]]] = None,
                  reset: Optional[Callable[[Cell, int], None]] = None,
                  markers_rate: float = 30.0, step_s: float = 1e-3,
-                 parameter_overrides=None) -> None:
+                 parameter_overrides=None, health: Optional[Health] = None) -> None:
         super().__init__(name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
+        self.health = health if health is not None else Health()
         self.stage = stage
         self.role = role
         self._stage_counters = counters or stage.counters
@@ -103,6 +107,10 @@ class ScaleNode(Node):
         """Place parts for a split-layout spawn request; return the reply bytes."""
         return b''
 
+    def part_reply(self, body: bytes) -> bytes:
+        """Answer a split-layout part query (``part_jam``); only the micro node holds parts."""
+        return b''
+
     def advance_remote(self, inp: StepInput) -> None:
         """Advance the stage with the coordinator's step input, then :meth:`finish_step`;
         with an exchange, keep the step pending and :meth:`exchange` (the node finishes it
@@ -155,6 +163,8 @@ class ScaleNode(Node):
             self._report(self._last_step, self.spawn_reply(body))
         elif kind == codec.COUNTERS:
             self._report(self._last_step, self._counters())
+        elif kind == codec.PART_QUERY:
+            self._report(self._last_step, self.part_reply(body))
         else:
             self.get_logger().error(f'unknown coupling payload {kind!r}; ignored')
 

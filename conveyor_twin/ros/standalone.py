@@ -1,5 +1,11 @@
-"""Run one scale node as its own process (split layout)."""
+"""Run one scale node as its own process (split layout).
 
+A failure of one of the process's threads (its executor, the markers thread) is reported once
+with its traceback; the process then ends with :data:`~conveyor_twin.health.EXIT_BACKGROUND_FAILURE`
+(the coordinator and ``conveyor-twin run --split`` notice it).
+"""
+
+import os
 import signal
 import sys
 import threading
@@ -13,8 +19,15 @@ from conveyor_twin.cell import CellError, load_cell
 from conveyor_twin.coord.assembly import AssembledTwin, build_twin, Layout
 from conveyor_twin.coord.runner import freeze_heap
 from conveyor_twin.coord.warmup import warm_up
+from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health
 from conveyor_twin.ros.compat import make_executor, spin_until
 from conveyor_twin.ros.params import declare_twin_parameters
+
+#: Set (to ``1``) by ``conveyor-twin run --split`` for its scale processes: they ignore SIGINT
+#: and stop on SIGTERM, which the run sends once the coordinator has stopped; so a Ctrl-C in
+#: the terminal (SIGINT to every process) never leaves the coordinator waiting for a scale
+#: process that is gone.
+IGNORE_SIGINT_ENV = 'CONVEYOR_TWIN_IGNORE_SIGINT'
 
 
 def start_process(name: str, argv: Optional[List[str]] = None):
@@ -48,16 +61,23 @@ def run_scale_node(layout: Layout, make_node: Callable[..., Node],
     node parameters, wrap it in its node, serve the coupling topic until shutdown.
 
     :param make_node: called with the :class:`AssembledTwin` and the node's keyword
-        arguments (``context``, ``remote``, ``markers_rate``, ``step_s``); returns the node.
+        arguments (``context``, ``remote``, ``markers_rate``, ``step_s``, ``health``); returns
+        the node.
+    :return: 0 after SIGINT/SIGTERM, 1 for an invalid cell, :data:`EXIT_BACKGROUND_FAILURE`
+        after a thread of the process failed.
     """
+    ignore_sigint = os.environ.get(IGNORE_SIGINT_ENV) == '1'
+    if ignore_sigint:  # from the start: a Ctrl-C during the set-up must not end it either
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     started = start_process(f'{layout}node', argv)
     if started is None:
         return 1
     context, params, cell, seed = started
     assembled: AssembledTwin = build_twin(cell, seed=seed, layout=layout)
     warm_up(cell, seed)  # load the step kernels now, not during the first steps
+    health = Health()
     node = make_node(assembled, context=context, remote=True, markers_rate=params.markers_rate,
-                     step_s=cell.settings.step)
+                     step_s=cell.settings.step, health=health)
     if params.scenario:  # the coordinator checks the file; here only: does it need measures?
         from conveyor_twin.faults.scenario import load_scenario, ScenarioError
         try:
@@ -68,10 +88,13 @@ def run_scale_node(layout: Layout, make_node: Callable[..., Node],
     executor = make_executor(context)
     executor.add_node(node)
     stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    if not ignore_sigint:
+        signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    health.listeners.append(lambda failure: stop.set())
     spin_stop = threading.Event()
-    spinner = threading.Thread(target=spin_until, args=(executor, spin_stop), daemon=True)
+    spinner = health.thread(f'{node.get_name()} executor thread', spin_until, executor,
+                            spin_stop)
     spinner.start()
     freeze_heap()  # no 60-80 ms full collections while stepping
     stop.wait()
@@ -80,4 +103,4 @@ def run_scale_node(layout: Layout, make_node: Callable[..., Node],
     executor.shutdown(timeout_sec=5.0)
     node.destroy_node()
     context.try_shutdown()
-    return 0
+    return EXIT_BACKGROUND_FAILURE if health.failed else 0
