@@ -33,6 +33,7 @@ class StopOnBarrier(Node):
         self.stopped_at_ns = None
         self.stops = 0
         self.restarts = 0
+        self.sequence = 0
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         self.command = self.create_publisher(BeltCommand, 'belt_command', qos)
         self.create_subscription(LightBarrierEdge, 'light_barrier_edges', self.on_edge,
@@ -40,7 +41,10 @@ class StopOnBarrier(Node):
         self.create_subscription(LightBarrierStates, 'light_barriers', self.on_states, qos)
 
     def _send(self, speed: float) -> None:
-        self.command.publish(BeltCommand(belt=self.belt, speed=speed))
+        # sender and sequence come back on command_status: this node's answers are its own
+        self.sequence += 1
+        self.command.publish(BeltCommand(belt=self.belt, speed=speed, sender=self.get_name(),
+                                         sequence=self.sequence))
 
     def on_edge(self, edge: LightBarrierEdge) -> None:
         """Stop the belt when the watched beam becomes blocked while the belt runs."""

@@ -48,6 +48,7 @@ STEP = b'S'
 RESET = b'R'
 SPAWN = b'P'
 COUNTERS = b'C'
+PART_QUERY = b'Q'  # does the micro scale hold a part of this id now? (part_jam requests)
 DONE = b'D'
 APPEND = b'A'
 REMOVE = b'R'
@@ -176,6 +177,21 @@ def parse_spawn_reply(reply: bytes) -> np.ndarray:
     if reply[:1] == b'E':
         raise ValueError(bytes(reply[1:]).decode())
     return np.frombuffer(reply[1:], '<u4')
+
+
+def part_query_payload(part_id: int) -> bytes:
+    """Return the ``Q`` payload: does the micro scale hold part ``part_id`` now?"""
+    return PART_QUERY + int(part_id).to_bytes(4, 'little')
+
+
+def parse_part_query(body: bytes) -> int:
+    """Return the part id of a part query's body."""
+    return int.from_bytes(bytes(body[:4]), 'little')
+
+
+def part_reply(exists: bool) -> bytes:
+    """Return the micro node's answer to a part query."""
+    return b'Y' if exists else b'N'
 
 
 _MEASURES = b'\x00M'  # never the start of counters (JSON)

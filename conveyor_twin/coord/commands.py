@@ -16,6 +16,8 @@ from conveyor_twin.cell.model import Cell
 
 BELT = 'belt'
 ACTUATOR = 'actuator'
+#: Largest ``sequence`` a command may carry (its wire type is uint32).
+SEQUENCE_MAX = 2**32 - 1
 
 
 @dataclass(frozen=True)
@@ -25,6 +27,8 @@ class Command:
     :param kind: ``belt`` (value = target speed [m/s]) or ``actuator`` (value = target position,
         m or rad).
     :param index: index of the belt or actuator in the cell.
+    :param sender: who sent it, as the command carried it (``''`` if it did not say).
+    :param sequence: the sender's number of it (uint32; 0 if it did not say).
     """
 
     kind: str
@@ -32,6 +36,8 @@ class Command:
     index: int
     value: float
     step: int = -1
+    sender: str = ''
+    sequence: int = 0
 
 
 class CommandRejected(ValueError):
@@ -66,8 +72,18 @@ class CommandBook:
             self.last_rejection = message
         return CommandRejected(message)
 
-    def validate_belt(self, belt: str, speed: float) -> Command:
-        """Return the valid belt command or raise :class:`CommandRejected`."""
+    def _check_origin(self, topic: str, sender: str, sequence: int) -> None:
+        if not isinstance(sender, str):
+            raise self.reject('bad_origin', f'{topic}: sender {sender!r} is not a string')
+        if isinstance(sequence, bool) or not isinstance(sequence, int) \
+                or not 0 <= sequence <= SEQUENCE_MAX:
+            raise self.reject('bad_origin', f'{topic}: sequence {sequence!r} is not an integer '
+                              f'in [0, {SEQUENCE_MAX}]')
+
+    def validate_belt(self, belt: str, speed: float, sender: str = '',
+                      sequence: int = 0) -> Command:
+        """Return the valid belt command (``speed`` [m/s]; ``sender`` and ``sequence`` as the
+        command carried them) or raise :class:`CommandRejected`."""
         if belt not in self._belts:
             known = ', '.join(self._belts)
             raise self.reject('unknown_belt', f'belt_command: unknown belt {belt!r} '
@@ -79,10 +95,13 @@ class CommandBook:
         if abs(speed) > max_speed:
             raise self.reject('out_of_range', f'belt_command: speed {speed!r} m/s for belt '
                                f'{belt!r} is outside [{-max_speed:g}, {max_speed:g}] m/s')
-        return Command(BELT, belt, index, float(speed))
+        self._check_origin('belt_command', sender, sequence)
+        return Command(BELT, belt, index, float(speed), -1, sender, sequence)
 
-    def validate_actuator(self, actuator: str, position: float) -> Command:
-        """Return the valid actuator command or raise :class:`CommandRejected`."""
+    def validate_actuator(self, actuator: str, position: float, sender: str = '',
+                          sequence: int = 0) -> Command:
+        """Return the valid actuator command (``position`` [m or rad]; ``sender`` and
+        ``sequence`` as the command carried them) or raise :class:`CommandRejected`."""
         if actuator not in self._actuators:
             known = ', '.join(self._actuators) or 'none'
             raise self.reject('unknown_actuator', f'actuator_command: unknown actuator '
@@ -95,21 +114,26 @@ class CommandBook:
             raise self.reject('out_of_range', f'actuator_command: position {position!r} '
                                f'{unit} for actuator {actuator!r} is outside '
                                f'[{low:g}, {high:g}] {unit}')
-        return Command(ACTUATOR, actuator, index, float(position))
+        self._check_origin('actuator_command', sender, sequence)
+        return Command(ACTUATOR, actuator, index, float(position), -1, sender, sequence)
 
     def submit(self, command: Command) -> None:
         """Queue a validated command for the next step boundary (thread-safe)."""
         self._pending.append(command)
 
-    def submit_belt(self, belt: str, speed: float) -> Command:
-        """Validate and queue a belt command; raise :class:`CommandRejected` if invalid."""
-        command = self.validate_belt(belt, speed)
+    def submit_belt(self, belt: str, speed: float, sender: str = '',
+                    sequence: int = 0) -> Command:
+        """Validate and queue a belt command (``speed`` [m/s], from ``sender`` with its
+        ``sequence`` number); raise :class:`CommandRejected` if invalid."""
+        command = self.validate_belt(belt, speed, sender, sequence)
         self.submit(command)
         return command
 
-    def submit_actuator(self, actuator: str, position: float) -> Command:
-        """Validate and queue an actuator command; raise :class:`CommandRejected` if invalid."""
-        command = self.validate_actuator(actuator, position)
+    def submit_actuator(self, actuator: str, position: float, sender: str = '',
+                        sequence: int = 0) -> Command:
+        """Validate and queue an actuator command (``position`` [m or rad], from ``sender``
+        with its ``sequence`` number); raise :class:`CommandRejected` if invalid."""
+        command = self.validate_actuator(actuator, position, sender, sequence)
         self.submit(command)
         return command
 
@@ -122,12 +146,12 @@ class CommandBook:
 
         Scheduled commands for this step come first, then the live queue.
         """
-        out = [Command(c.kind, c.name, c.index, c.value, step)
+        out = [Command(c.kind, c.name, c.index, c.value, step, c.sender, c.sequence)
                for c in self._scheduled.pop(step, ())]
         pending = self._pending
         while pending:
             c = pending.popleft()
-            out.append(Command(c.kind, c.name, c.index, c.value, step))
+            out.append(Command(c.kind, c.name, c.index, c.value, step, c.sender, c.sequence))
         return out
 
     def clear(self) -> None:

@@ -6,12 +6,13 @@ with its text; nothing is applied.
 """
 
 from dataclasses import dataclass
-from typing import Sequence
+import math
+from typing import Optional, Sequence
 
 import numpy as np
 
 from conveyor_twin.cell import CellError, load_cell
-from conveyor_twin.cell.model import Cell
+from conveyor_twin.cell.model import Belt, Cell, Obstacle, ObstacleKind
 
 
 class RequestRejected(ValueError):
@@ -50,8 +51,11 @@ def check_spawn(cell: Cell, part_type: str, x: Sequence[float], y: Sequence[floa
     :param part_type: name of a part type of the cell.
     :param x: x of every part [m]. :param y: y of every part [m].
     :param yaw: yaw of every part [rad]; empty: 0 for every part.
-    :raises RequestRejected: for an unknown part type, arrays of different or zero length, or a
-        pose that is not a finite number.
+    :raises RequestRejected: for an unknown part type, arrays of different or zero length, a
+        pose that is not a finite number, or a part whose centre is not on a belt's surface
+        or whose footprint (its bounding circle) overlaps a static obstacle (a wall, a
+        deflector, a peg, a polygon); the message names the part (its index in the request),
+        its position and the region allowed.
     """
     n = len(x)
     try:
@@ -66,7 +70,75 @@ def check_spawn(cell: Cell, part_type: str, x: Sequence[float], y: Sequence[floa
                               f'(got {n}, {len(y)}, {len(yaw)})')
     if not (np.isfinite(xs).all() and np.isfinite(ys).all() and np.isfinite(yaws).all()):
         raise RequestRejected('poses must be finite numbers')
+    radius = cell.part_types[type_index].bounding_radius
+    for k in range(n):
+        problem = placement_problem(cell, float(xs[k]), float(ys[k]), radius)
+        if problem:
+            raise RequestRejected(f'part {k} ({part_type}) at x = {xs[k]:g} m, y = {ys[k]:g} m '
+                                  f'{problem}; nothing placed')
     return SpawnRequest(part_type, type_index, xs, ys, yaws)
+
+
+def belt_region(belt: Belt) -> str:
+    """Describe the surface of a belt (where a spawned part's centre may lie)."""
+    (x0, y0), (x1, y1) = belt.start, belt.end
+    if y0 == y1 and x0 <= x1:
+        return (f'belt {belt.name!r}: x {x0:g}..{x1:g} m, y {y0 - belt.width / 2:g}..'
+                f'{y0 + belt.width / 2:g} m')
+    return (f'belt {belt.name!r}: {belt.width:g} m wide along ({x0:g}, {y0:g})-'
+            f'({x1:g}, {y1:g}) m')
+
+
+def on_belt(belt: Belt, x: float, y: float) -> bool:
+    """True if (x, y) [m] lies on the surface of ``belt`` (edges included)."""
+    dx, dy = belt.direction
+    rx, ry = x - belt.start[0], y - belt.start[1]
+    along, across = rx * dx + ry * dy, -rx * dy + ry * dx
+    eps = 1e-9
+    return -eps <= along <= belt.length + eps and abs(across) <= belt.width / 2 + eps
+
+
+def placement_problem(cell: Cell, x: float, y: float, radius: float) -> str:
+    """Return why a part of bounding ``radius`` [m] cannot be spawned at (x, y) [m] on
+    ``cell`` ('' if it can): its centre must lie on a belt's surface, its bounding circle must
+    not overlap a static obstacle."""
+    if not any(on_belt(b, x, y) for b in cell.belts):
+        regions = '; '.join(belt_region(b) for b in cell.belts)
+        return f'is not on a belt (allowed: a centre on {regions})'
+    for obstacle in cell.obstacles:
+        gap = _clearance(obstacle, x, y)
+        if gap is not None and gap < radius:
+            return (f'overlaps {obstacle.kind.value} {obstacle.name!r} (its footprint reaches '
+                    f'{radius:g} m from the centre, the obstacle is {max(gap, 0.0):g} m away; '
+                    'allowed: on a belt, clear of every wall, deflector, peg and polygon)')
+    return ''
+
+
+def _segment_distance(px: float, py: float, a: Sequence[float], b: Sequence[float]) -> float:
+    ax, ay = a
+    bx, by = b
+    vx, vy = bx - ax, by - ay
+    length2 = vx * vx + vy * vy
+    t = 0.0 if length2 == 0.0 else min(1.0, max(0.0, ((px - ax) * vx + (py - ay) * vy)
+                                                / length2))
+    return math.hypot(px - (ax + t * vx), py - (ay + t * vy))
+
+
+def _clearance(obstacle: Obstacle, x: float, y: float) -> Optional[float]:
+    """Distance [m] from (x, y) to the surface of ``obstacle`` (negative or 0 inside)."""
+    points = obstacle.points
+    if obstacle.kind in (ObstacleKind.WALL, ObstacleKind.DEFLECTOR):
+        return min(_segment_distance(x, y, points[i], points[i + 1])
+                   for i in range(len(points) - 1)) - obstacle.thickness / 2
+    if obstacle.kind == ObstacleKind.PEG:
+        return math.hypot(x - points[0][0], y - points[0][1]) - obstacle.radius
+    if obstacle.kind == ObstacleKind.POLYGON:
+        edges = [(points[i], points[(i + 1) % len(points)]) for i in range(len(points))]
+        inside = all((b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0]) >= 0.0
+                     for a, b in edges)
+        distance = min(_segment_distance(x, y, a, b) for a, b in edges)
+        return -distance if inside else distance
+    return None
 
 
 def same_interface(a: Cell, b: Cell) -> bool:

@@ -3,8 +3,10 @@ or deliver the wrong type (no ROS imports).
 
 - ``part_jam``: the part (by id, or the one nearest to (x, y) when the fault takes effect, within
   its bounding radius) keeps the pose it had then, at rest, after every step; other parts
-  collide with it as with any part and are held up. If no part is there, or the part leaves
-  the micro scale, the fault holds nothing.
+  collide with it as with any part and are held up. A request naming a part id the micro
+  scale does not hold when it is made is rejected (:func:`holds_part`; the coordinator asks
+  the micro stage, in the split layout over the coupling). If the part leaves the micro
+  scale before the next step, or no part is near (x, y), the fault holds nothing.
 - ``parts_vanish``: after every step the parts whose centre lies in the rectangle are removed
   and counted as ``vanished`` in the part ledger.
 - ``source_surge``: the source's rate is multiplied by ``factor``; ``source_wrong_type``: it
@@ -25,6 +27,13 @@ from conveyor_twin.micro.state import P_VX, P_VY, P_WZ, P_X, P_X_PREV, P_Y, P_Y_
     P_YAW_PREV, PT_BRAD
 
 _KINDS = ('part_jam', 'parts_vanish', 'source_surge', 'source_wrong_type')
+
+
+def holds_part(sim: MicroSim, part_id: int) -> bool:
+    """True if the micro scale holds a part of id ``part_id`` now (a ``part_jam`` target)."""
+    ids = sim.parts_view().id
+    row = int(np.searchsorted(ids, part_id))
+    return row < len(ids) and int(ids[row]) == int(part_id)
 
 
 class MaterialFaults:

@@ -87,8 +87,8 @@ KINDS: Dict[str, Kind] = {
                                     'commands to the actuator take effect `delay` late'),
     'part_jam': Kind(PART, {'x': Param('m', -1e4, 1e4, math.nan),
                             'y': Param('m', -1e4, 1e4, math.nan)},
-                     'a part is stuck at its pose (target: its id, or empty and the part '
-                     'nearest to (`x`, `y`))'),
+                     'a part is stuck at its pose (target: the id of a part in the micro '
+                     'scale now, or empty and the part nearest to (`x`, `y`))'),
     'parts_vanish': Kind(REGION, dict(_REGION),
                          'parts whose centre enters the rectangle fall off the line'),
     'source_surge': Kind(SOURCE, {'factor': Param('1', 1.0, 100.0, open_low=True)},
@@ -211,6 +211,13 @@ def _params(where: str, kind: Kind, given: Dict[str, float]) -> Dict[str, float]
                                 f'{low}{p.low:g}, {p.high:g}]{unit}')
         out[name] = value
     return out
+
+
+def no_such_part(part_id: int) -> FaultRejected:
+    """The rejection of a ``part_jam`` on a part id the micro scale does not hold now."""
+    return FaultRejected(f"fault 'part_jam': target {str(part_id)!r}: no such part exists now "
+                         '(no part of that id is in the micro scale: never placed, left '
+                         'through a sink, fell off, or handed over to the macro scale)')
 
 
 def _named(where: str, what: str, target: str, names) -> int:

@@ -227,11 +227,14 @@ def _schedule(path: str, twin: Any, step_ns: int, report: ResimReport) -> None:
     book = twin.commands
     for m in reader.read_messages(path, topics=[ACCEPTED_BELT_COMMANDS,
                                                 ACCEPTED_ACTUATOR_COMMANDS], linear=True):
-        try:
+        try:  # with the sender and sequence it carried ('', 0 if recorded without them)
             if m.topic == ACCEPTED_BELT_COMMANDS:
-                command = book.validate_belt(*cdr.decode_belt_command(m.data))
+                command = book.validate_belt(*cdr.decode_belt_command(m.data),
+                                             *cdr.decode_command_origin(m.data, 'BeltCommand'))
             else:
-                command = book.validate_actuator(*cdr.decode_actuator_command(m.data))
+                command = book.validate_actuator(
+                    *cdr.decode_actuator_command(m.data),
+                    *cdr.decode_command_origin(m.data, 'ActuatorCommand'))
         except (CommandRejected, ValueError) as exc:
             raise RecordingError(f'{path}: recorded command #{m.sequence} on {m.topic} '
                                  f'(log time {m.log_time} ns) cannot be applied: {exc}') from None

@@ -21,10 +21,13 @@ from conveyor_twin.wire import cdr
 
 
 def encode_command(command: Command) -> bytes:
-    """Return the BeltCommand/ActuatorCommand CDR of an accepted command."""
+    """Return the BeltCommand/ActuatorCommand CDR of an accepted command, with the sender and
+    sequence number it arrived with."""
     if command.kind == BELT:
-        return cdr.encode_belt_command(command.name, command.value)
-    return cdr.encode_actuator_command(command.name, command.value)
+        return cdr.encode_belt_command(command.name, command.value, command.sender,
+                                       command.sequence)
+    return cdr.encode_actuator_command(command.name, command.value, command.sender,
+                                       command.sequence)
 
 
 class RecordingSink:

@@ -23,6 +23,7 @@ from conveyor_twin.testing.errors import (CommandRejectedError, ConditionNotMet,
 from conveyor_twin.testing.harness import (ActuatorState, BarrierState, BeltSample,
                                            BeltState, CommandRecord, DEFAULT_CHUNK,
                                            DensityGrid, Edge, LockstepTwin, PartStates)
+from conveyor_twin.testing.pacing import StepAck
 from conveyor_twin.testing.probe import Probe
 from conveyor_twin.testing.processes import RosProcesses, stop_all_started, stop_process
 from conveyor_twin.testing.ros_env import (claim_domain_id, configure_session, DomainLease,
@@ -35,6 +36,7 @@ __all__ = [
     'configure_session', 'dead_shm_files', 'DEFAULT_CHUNK', 'DensityGrid', 'DomainLease', 'Driver', 'Edge',
     'FaultRejectedError',
     'lease_domain_id', 'LockstepTwin', 'PartStates', 'Probe', 'quiet_cell',
+    'StepAck',
     'remove_dead_shm_files', 'ros_subprocess_env', 'RosProcesses', 'ServiceError',
     'stop_all_started', 'stop_process', 'TwinClosedError', 'TwinTimeoutError', 'wait_for',
 ]

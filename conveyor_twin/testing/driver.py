@@ -17,6 +17,7 @@ from rclpy.serialization import deserialize_message
 
 from conveyor_twin.ros.qos import COMMAND_QOS
 from conveyor_twin.testing.errors import TwinTimeoutError
+from conveyor_twin.testing.outages import EdgeAccount
 from conveyor_twin.testing.probe import Probe, STREAMS
 from conveyor_twin.testing.ros_env import wait_for
 from conveyor_twin.wire import cdr
@@ -50,9 +51,19 @@ def command_result(status: DiagnosticStatus) -> CommandResult:
                          int(values.get('step', -1)))
 
 
-def _command_key(topic: str, target: str, value: float) -> tuple:
-    # a ROS string ends at its first NUL: the twin sees (and answers with) only that much
-    return topic, target.split('\x00', 1)[0], repr(float(value))
+def command_origin(status: DiagnosticStatus) -> tuple:
+    """Return (sender, sequence) a ``command_status`` message echoes ('' and 0 for a command
+    sent without them)."""
+    values = {kv.key: kv.value for kv in status.values}
+    try:
+        sequence = int(values.get('sequence', '0'))
+    except ValueError:
+        sequence = 0
+    return values.get('sender', ''), sequence
+
+
+def _nothing() -> None:
+    """The default health check of a driver: nothing to check."""
 
 
 class Driver:
@@ -68,6 +79,15 @@ class Driver:
                  timeout: float = TIMEOUT) -> None:
         self.density_per_step = density_per_step
         self.timeout = timeout
+        #: The ``sender`` of the commands this driver sends (``command_status`` echoes it).
+        self.sender = name
+        self._sequence = 0
+        #: Called while waiting: raises when a background thread or process of the twin (or a
+        #: controller) failed, so a wait ends at once with the failure instead of a timeout.
+        self.watch: Callable[[], None] = _nothing
+        #: Called after every chunk: waits for paced controller processes (see the harness).
+        self.after_chunk: Callable[[int], None] = lambda stamp_ns: None
+        self._edges = EdgeAccount()
         self.probe = Probe(context, topics=LISTENED, name=name)
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.probe)
@@ -82,8 +102,10 @@ class Driver:
                                                         COMMAND_QOS)
 
     def wait_connected(self, timeout: Optional[float] = None) -> bool:
-        """Wait until every stream, service and command topic of the twin is matched."""
-        return wait_for(lambda: self.probe.matched() and self.step_client.service_is_ready()
+        """Wait until every stream, service and command topic of the twin is matched (or
+        :attr:`watch` raises: a process of the twin died)."""
+        return wait_for(lambda: self.watch() is None and self.probe.matched()
+                        and self.step_client.service_is_ready()
                         and self.spawn_client.service_is_ready()
                         and self.reset_client.service_is_ready()
                         and self.inject_client.service_is_ready()
@@ -93,19 +115,32 @@ class Driver:
                                 if s.topic_name != '/clock'),
                         self.timeout if timeout is None else timeout, self.executor)
 
-    def wait(self, condition: Callable[[], bool], what: str) -> None:
-        """Spin until ``condition`` holds; raise :class:`TwinTimeoutError` naming ``what``."""
-        if not wait_for(condition, self.timeout, self.executor):
-            raise TwinTimeoutError(f'{what}: not within {self.timeout:g} s '
-                                   f'(messages so far: {self.counts()})')
+    def wait(self, condition: Callable[[], bool], what: Union[str, Callable[[], str]],
+             timeout: Optional[float] = None) -> None:
+        """Spin until ``condition`` holds; raise :class:`TwinTimeoutError` naming ``what`` and
+        the active stream outages (or the background failure :attr:`watch` raises)."""
+        limit = self.timeout if timeout is None else timeout
+
+        def watched() -> bool:
+            self.watch()
+            return condition()
+
+        if not wait_for(watched, limit, self.executor):
+            self.watch()
+            what = what() if callable(what) else what
+            raise TwinTimeoutError(f'{what}: not within {limit:g} s (messages so far: '
+                                   f'{self.counts()}; {self.outages()})')
+
+    def outages(self) -> str:
+        """Name the active stream outages as the latest ``faults`` message states them."""
+        timeline = self._edges.timeline
+        timeline.update(self.probe.received['faults'])
+        return timeline.describe()
 
     def call(self, client: Any, request: Any) -> Any:
         """Call a service and return its response (bounded wait)."""
         future = client.call_async(request)
-        self.executor.spin_until_future_complete(future, timeout_sec=self.timeout)
-        if not future.done():
-            raise TwinTimeoutError(f'service {client.srv_name} did not answer within '
-                                   f'{self.timeout:g} s')
+        self.wait(future.done, f'service {client.srv_name} did not answer')
         return future.result()
 
     def step(self, n: int, chunk: int = 50) -> Step.Response:
@@ -114,27 +149,30 @@ class Driver:
         response = None
         while n > 0:
             k = min(n, chunk)
-            before = self.counts()
             response = self.call(self.step_client, Step.Request(steps=k))
             want_ns = response.stamp.sec * 1_000_000_000 + response.stamp.nanosec
-            want_density = before['density'] + k * self.density_per_step
-            self.wait(lambda: self._arrived(want_ns, want_density),
-                      f'streams of steps up to {response.step}')
+            self.wait(lambda: self._arrived(want_ns),
+                      lambda: f'streams of steps up to {response.step} (t = {want_ns} ns; '
+                              f'missing: {", ".join(self._missing(want_ns)) or "none"})')
             self.settle_commands()
+            self.after_chunk(want_ns)
             n -= k
         return response
 
-    def _arrived(self, want_ns: int, want_density: int) -> bool:
-        """True once every per-step stream has a message of ``want_ns`` (streams silenced by
-        a ``stream_outage`` fault, as the latest fault state says, are not waited for)."""
+    def _missing(self, want_ns: int) -> List[str]:
+        """Return the per-step streams that have no message of ``want_ns`` yet and are not
+        silenced by a ``stream_outage`` fault (as the latest fault state says)."""
         received = self.probe.received
         silent = self.silenced()
-        for topic in EVERY_STEP:
-            if topic not in silent:
-                messages = received[topic]
-                if not messages or cdr.stamp_of(messages[-1]) < want_ns:
-                    return False
-        return 'density' in silent or len(received['density']) >= want_density
+        topics = EVERY_STEP + (('density',) if self.density_per_step else ())
+        # each stream comes from one writer, in order: its latest message is its newest step
+        return [t for t in topics if t not in silent
+                and (not received[t] or cdr.stamp_of(received[t][-1]) < want_ns)]
+
+    def _arrived(self, want_ns: int) -> bool:
+        """True once every per-step stream has a message of ``want_ns`` (streams silenced by
+        a ``stream_outage`` fault, as the latest fault state says, are not waited for)."""
+        return not self._missing(want_ns)
 
     def fault_state(self) -> Optional[FaultStateData]:
         """Return the latest ``faults`` message received, decoded (None before the first;
@@ -196,13 +234,24 @@ class Driver:
         """Messages received so far per topic."""
         return {t: len(v) for t, v in self.probe.received.items()}
 
+    def forget(self) -> None:
+        """Forget every message received (after a reset)."""
+        for messages in self.probe.received.values():
+            messages.clear()
+        self._edges = EdgeAccount()
+        self._fault_state = (None, None)
+
     def command(self, msg: Union[BeltCommand, ActuatorCommand]) -> CommandResult:
-        """Publish a belt or actuator command and wait for the twin's answer to it."""
+        """Publish a belt or actuator command with this driver's ``sender`` and the next
+        ``sequence`` number, and wait for the twin's answer to it (matched by both)."""
+        self._sequence = self._sequence % 0xFFFFFFFF + 1
+        msg.sender, msg.sequence = self.sender, self._sequence
         if isinstance(msg, BeltCommand):
-            publisher, key = self.belt_pub, _command_key('belt_command', msg.belt, msg.speed)
+            publisher, what = self.belt_pub, f'belt_command {msg.belt!r} = {msg.speed!r}'
         else:
             publisher = self.actuator_pub
-            key = _command_key('actuator_command', msg.actuator, msg.position)
+            what = f'actuator_command {msg.actuator!r} = {msg.position!r}'
+        key = (msg.sender, msg.sequence)
         statuses = self.probe.received['command_status']
         seen = len(statuses)
         found: List[CommandResult] = []
@@ -212,14 +261,14 @@ class Driver:
             while seen < len(statuses):
                 status = deserialize_message(statuses[seen], DiagnosticStatus)
                 seen += 1
-                values = {kv.key: kv.value for kv in status.values}
-                if (status.name, status.hardware_id, values.get('value')) == key:
+                if command_origin(status) == key:
                     found.append(command_result(status))
                     return True
             return False
 
         publisher.publish(msg)
-        self.wait(answered, f'answer of the twin to {key[0]} {key[1]!r} = {key[2]}')
+        self.wait(answered, f'answer of the twin to {what} (sender {key[0]!r}, sequence '
+                            f'{key[1]})')
         return found[0]
 
     def spawn(self, part_type: str, x: Any, y: Any, yaw: Any) -> SpawnParts.Response:
@@ -231,14 +280,22 @@ class Driver:
         """Restart the twin through the ``reset`` service; return its response."""
         return self.call(self.reset_client, Reset.Request(cell_file=cell_file, seed=seed))
 
+    def expected_edges(self) -> int:
+        """Return the light-barrier edges published up to the latest barrier state received:
+        the edges counted in steps when ``light_barrier_edges`` was not silenced."""
+        received = self.probe.received
+        return self._edges.expected(received['light_barriers'], received['faults'])
+
     def settle_edges(self) -> None:
-        """Wait until every edge counted in the last barrier state has arrived."""
+        """Wait until every edge counted in the last barrier state and published (not
+        silenced by a ``stream_outage``) has arrived."""
         received = self.probe.received
         if not received['light_barriers']:
             return
-        total = int(sum(cdr.decode_light_barrier_states(received['light_barriers'][-1])[5]))
-        self.wait(lambda: len(received['light_barrier_edges']) >= total,
-                  f'{total} light-barrier edges')
+        edges = received['light_barrier_edges']
+        self.wait(lambda: len(edges) >= self.expected_edges(),
+                  lambda: f'{self.expected_edges()} light-barrier edges counted and published '
+                          f'({len(edges)} arrived)')
 
     def run(self, sequence: Any) -> None:
         """Play a sequence of ``('step', n)``, ``('command', msg)``, ``('spawn', args)``."""

@@ -7,132 +7,87 @@ processes) in ``lockstep`` mode, in a private rclpy context on a domain id no ot
 reads the twin's internals, so what a test sees is what a controller sees.
 """
 
+from contextlib import contextmanager
 import os
 from pathlib import Path
 import shutil
 import subprocess
 import tempfile
-from typing import (Any, Callable, Dict, List, Mapping, NamedTuple, Optional, Sequence, Union)
+from typing import (Any, Callable, Dict, Iterator, List, Mapping, Optional, Sequence, Union)
 
-from conveyor_twin_msgs.msg import (ActuatorCommand, ActuatorStates, BeltCommand, BeltStates,
-                                    LightBarrierEdge)
-from diagnostic_msgs.msg import DiagnosticStatus
+from conveyor_twin_msgs.msg import ActuatorCommand, BeltCommand
 import numpy as np
 import rclpy
 from rclpy.context import Context
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 
 from conveyor_twin.cell import load_cell
 from conveyor_twin.cell.model import Cell
-from conveyor_twin.testing._layout import density_per_step, Layout, start_layout
-from conveyor_twin.testing.driver import command_result, CommandResult, Driver, TIMEOUT
+from conveyor_twin.health import BackgroundFailure
+from conveyor_twin.testing import checks
+from conveyor_twin.testing._layout import density_per_step, Layout, LAYOUTS, start_layout
+from conveyor_twin.testing.driver import CommandResult, Driver, TIMEOUT
 from conveyor_twin.testing.errors import (CommandRejectedError, ConditionNotMet,
                                           FaultRejectedError, ServiceError,
                                           TwinClosedError, TwinTimeoutError)
 from conveyor_twin.testing.processes import RosProcesses
-from conveyor_twin.testing.ros_env import DomainLease, lease_domain_id
-from conveyor_twin.wire import cdr
+from conveyor_twin.testing.reading import DensityGrid, PartStates, StreamReader
+from conveyor_twin.testing.ros_env import (DomainLease, lease_domain_id,
+                                           loopback_environment, wait_for)
+from conveyor_twin.testing.states import (ActuatorState, BarrierState, BeltSample, BeltState,
+                                          CommandRecord, Edge)
+from conveyor_twin.testing.supervision import keep_dir_note, Supervisor
 from conveyor_twin.wire.fault_state import FaultEntry
 
 DEFAULT_CHUNK = 10      # steps per ``step`` service call: a controller reacts within this many
 DEFAULT_SEED = 0
-PartStates = cdr.PartStatesData
-DensityGrid = cdr.DensityGridData
+#: The failures that keep the twin's logs and name where they are.
+_FAILURES = (TwinTimeoutError, BackgroundFailure, ConditionNotMet)
+
+__all__ = ['ActuatorState', 'BarrierState', 'BeltSample', 'BeltState', 'CommandRecord',
+           'DEFAULT_CHUNK', 'DensityGrid', 'Edge', 'LockstepTwin', 'PartStates']
 
 
-class BeltState(NamedTuple):
-    """A belt as ``belt_states`` last reported it: speeds [m/s]."""
-
-    commanded_speed: float
-    speed: float
-
-
-class ActuatorState(NamedTuple):
-    """An actuator as ``actuator_states`` last reported it: positions [m] or [rad]."""
-
-    commanded_position: float
-    position: float
-
-
-class BeltSample(NamedTuple):
-    """One belt in one ``belt_states`` message: its stamp [ns] and speeds [m/s]."""
-
-    stamp_ns: int
-    commanded: float
-    actual: float
-
-
-class BarrierState(NamedTuple):
-    """A light barrier as ``light_barriers`` last reported it."""
-
-    blocked: bool
-    edge_count: int
-
-
-class Edge(NamedTuple):
-    """A light-barrier edge (``light_barrier_edges``).
-
-    :param name: the barrier
-    :param blocked: True when the beam became interrupted
-    :param part_id: the part (0 for an edge of the macro scale)
-    :param time_ns: interpolated simulation time of the edge [ns]
-    :param step: the step during which it happened
-    """
-
-    name: str
-    blocked: bool
-    part_id: int
-    time_ns: int
-    step: int
-
-
-class CommandRecord(NamedTuple):
-    """A command the twin answered on ``command_status`` (from the harness or a controller).
-
-    :param topic: ``belt_command`` or ``actuator_command``
-    :param target: the belt or actuator named in the command
-    :param value: commanded speed [m/s] or position [m] or [rad]
-    :param result: accepted, or rejected with the reason
-    """
-
-    topic: str
-    target: str
-    value: float
-    result: CommandResult
-
-
-class LockstepTwin:
+class LockstepTwin(StreamReader):
     """A twin in lockstep, started for a test; a context manager.
 
     :param cell: a cell file, a :class:`~conveyor_twin.cell.model.Cell`, or None for the
         embedded default cell
-    :param seed: random seed of the run
+    :param seed: random seed of the run (an integer in [0, 2**64 - 1])
     :param layout: ``composed`` (one process: this one) or ``split`` (three processes; needs a
         cell file or the default cell)
     :param chunk: steps per ``step`` service call; between calls the harness waits for every
         stream and for the twin's answer to every command, so an attached controller reacts
         within ``chunk`` steps
-    :param timeout: longest wait for any one answer of the twin or a controller [s]
+    :param timeout: longest wait for any one answer of the twin or a controller [s] (> 0)
     :param foxglove: ``[HOST:]PORT`` to serve a live Foxglove view of the test's twin at (watch
         a test step by step); None: no view. Composed: port 0 picks a free one, see
         :attr:`foxglove`; split: the coordinator process serves it, give a port.
     :param scenario: a fault scenario file to arm (``docs/faults.md``); checked before the
         twin starts
-    :raises ValueError: on an unknown layout, an invalid ``foxglove`` address, or port 0 with
-        the split layout
+    :raises ValueError: on an unknown layout, a seed, chunk or timeout out of range (the
+        message names it, the value and the range), an invalid ``foxglove`` address, or port 0
+        with the split layout
     :raises conveyor_twin.faults.scenario.ScenarioError: on an invalid scenario file
     :raises conveyor_twin.viz.foxglove_view.FoxgloveError: if the view cannot listen there
     :raises conveyor_twin.cell.CellError: on an invalid cell file
+
+    The twin leaves no trace: the process's environment is not changed (the domain id and
+    loopback discovery go to its own rclpy context and its child processes), and its folder
+    of logs (split processes, controller processes) is removed at :meth:`close` unless the
+    twin failed; then the error names the folder.
     """
 
     def __init__(self, cell: Union[None, str, Path, Cell] = None, *, seed: int = DEFAULT_SEED,
                  layout: Layout = 'composed', chunk: int = DEFAULT_CHUNK,
                  timeout: float = TIMEOUT, foxglove: Optional[str] = None,
                  scenario: Union[None, str, Path] = None) -> None:
-        if chunk < 1:
-            raise ValueError(f'chunk must be at least 1 step (got {chunk})')
+        seed = checks.integer('seed', seed, 0, checks.UINT64_MAX)
+        chunk = checks.integer('chunk', chunk, 1, checks.UINT32_MAX)
+        timeout = checks.seconds('timeout', timeout, open_low=True)
+        if layout not in LAYOUTS:
+            raise ValueError(f'layout {layout!r} is not one of {", ".join(LAYOUTS)}')
         if foxglove is not None:
             from conveyor_twin.viz.foxglove_view import FoxgloveError, parse_address
             try:
@@ -156,33 +111,38 @@ class LockstepTwin:
         #: Simulation time of the last step, as the ``step`` service answered it [ns].
         self.time_ns = 0
         self._closed = False
+        self._failed = False
+        self._raised = 0  # background failures already raised to the test
         self._nodes: List[Node] = []
-        self._controllers: List[subprocess.Popen] = []
         self._log_dir = Path(tempfile.mkdtemp(prefix='conveyor_twin_test_'))
         self._lease: Optional[DomainLease] = lease_domain_id()
         self.domain_id = self._lease.domain_id
         self._processes = RosProcesses(domain_id=self.domain_id)
         self._running = None
         self._driver: Optional[Driver] = None
-        # rcl reads the discovery range at init: nothing of this context leaves the machine.
-        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-        os.environ.pop('ROS_LOCALHOST_ONLY', None)
-        os.environ.pop('ROS_STATIC_PEERS', None)
+        self._supervisor: Optional[Supervisor] = None
         self.context: Optional[Context] = None
         try:
             context = Context()
-            rclpy.init(context=context, domain_id=self.domain_id,
-                       signal_handler_options=SignalHandlerOptions.NO)
+            with loopback_environment():
+                rclpy.init(context=context, domain_id=self.domain_id,
+                           signal_handler_options=SignalHandlerOptions.NO)
             self.context = context
             self._running = start_layout(self.cell, cell_file, seed=seed, layout=layout,
                                          context=self.context, domain_id=self.domain_id,
-                                         foxglove=foxglove or '', scenario=self.scenario)
+                                         log_dir=self._log_dir, foxglove=foxglove or '',
+                                         scenario=self.scenario)
+            self._supervisor = Supervisor(self._running, self._log_dir, self._processes)
             self._driver = Driver(self.context, density_per_step=density_per_step(self.cell),
                                   name='conveyor_twin_test', timeout=timeout)
-            if not self._driver.wait_connected():
-                raise TwinTimeoutError(f'the {layout} twin was not discovered within '
-                                       f'{timeout:g} s\n{self._running.logs()}')
+            self._driver.watch = self._supervisor.check
+            self._driver.after_chunk = self._after_chunk
+            with self._failing():
+                if not self._driver.wait_connected():
+                    raise TwinTimeoutError(f'the {layout} twin was not discovered within '
+                                           f'{timeout:g} s\n{self._running.logs()}')
         except BaseException:
+            self._failed = True
             self.close()
             raise
 
@@ -198,18 +158,65 @@ class LockstepTwin:
         """True after :meth:`close`."""
         return self._closed
 
+    @property
+    def log_dir(self) -> Path:
+        """The twin's folder of logs (split processes, controllers); removed at :meth:`close`
+        unless the twin failed."""
+        return self._log_dir
+
     def _check_open(self, what: str) -> Driver:
         if self._closed or self._driver is None:
             raise TwinClosedError(f'{what}: the twin is closed (used after close() or outside '
                                   'its with block)')
         return self._driver
 
+    def _acting(self, what: str) -> Driver:
+        """The driver, for a call that drives the twin: raise when the twin is closed or
+        a background thread or process failed."""
+        driver = self._check_open(what)
+        with self._failing():
+            self._supervisor.check()
+        return driver
+
+    @contextmanager
+    def _failing(self) -> Iterator[None]:
+        """Mark the twin failed on a timeout, a background failure or an unmet condition,
+        and name the folder of its logs (kept) in the error."""
+        try:
+            yield
+        except _FAILURES as exc:
+            self._failed = True
+            if isinstance(exc, BackgroundFailure):
+                self._raised = len(exc.failures)
+            note = keep_dir_note(self._log_dir)
+            if any(self._log_dir.iterdir()) and note not in str(exc):
+                exc.args = (f'{exc}{note}',) + exc.args[1:]
+            raise
+
+    def unreported_failures(self) -> Optional[BackgroundFailure]:
+        """Return the background failures the test was not told of yet (None if none): what
+        failed after the last call that drove the twin (the pytest fixtures raise it)."""
+        if self._supervisor is None or self._closed:
+            return None
+        try:
+            self._supervisor.check()
+        except BackgroundFailure as exc:
+            if len(exc.failures) > self._raised:
+                self._failed = True
+                return exc
+        return None
+
     def close(self) -> None:
-        """Stop controllers, attached nodes and the twin; release the domain. Idempotent."""
+        """Stop controllers, attached nodes and the twin; release the domain; remove the folder
+        of logs unless the twin failed. Idempotent."""
         if self._closed:
             return
+        if self._supervisor is not None and self._supervisor.failed():
+            self._failed = True
         self._closed = True
         try:
+            if self._supervisor is not None:
+                self._supervisor.stop()
             self._processes.stop_all()
             if self._driver is not None:
                 for node in self._nodes:
@@ -224,7 +231,8 @@ class LockstepTwin:
                 rclpy.try_shutdown(context=self.context)
             if self._lease is not None:
                 self._lease.release()
-            shutil.rmtree(self._log_dir, ignore_errors=True)
+            if not (self._failed and self._log_dir.exists() and any(self._log_dir.iterdir())):
+                shutil.rmtree(self._log_dir, ignore_errors=True)
 
     @property
     def foxglove(self) -> Any:
@@ -248,23 +256,38 @@ class LockstepTwin:
     def step(self, n: int = 1) -> int:
         """Advance ``n`` steps; return once every stream of them (and every edge) has reached
         the harness's subscribers and the twin has answered every command sent meanwhile.
+        Streams silenced by a ``stream_outage`` fault (and the edges counted while
+        ``light_barrier_edges`` is silenced) are not waited for.
 
-        :param n: steps to take (at least 1)
+        :param n: steps to take, an integer >= 0 (0: no step; the twin's health is checked)
         :return: the new step index
+        :raises ValueError: for ``n`` not an integer >= 0
         :raises TwinClosedError: after :meth:`close`
+        :raises TwinTimeoutError: when a stream or answer does not come in time; the message
+            names what was waited for and the active stream outages
+        :raises BackgroundFailure: when a background thread or process of the twin (or a
+            started controller) failed
         """
-        driver = self._check_open(f'step({n})')
-        if n < 1:
-            raise ValueError(f'step(n) takes at least 1 step (got {n})')
-        response = driver.step(n, chunk=self.chunk)
-        driver.settle_edges()
+        n = checks.integer('step(n): n', n, 0, None)
+        driver = self._acting(f'step({n})')
+        if n == 0:
+            return self.step_index
+        with self._failing():
+            response = driver.step(n, chunk=self.chunk)
+            driver.settle_edges()
+            self._supervisor.check()
         self.step_index = int(response.step)
         self.time_ns = response.stamp.sec * 10**9 + response.stamp.nanosec
         return self.step_index
 
     def step_for(self, seconds: float) -> int:
-        """Advance by ``seconds`` of simulation time (rounded to whole steps) [s]."""
-        return self.step(max(1, round(seconds / self.step_s)))
+        """Advance by ``seconds`` of simulation time, rounded to whole steps [s].
+
+        :param seconds: a finite number >= 0 (less than half a step: no step)
+        :raises ValueError: for a negative, infinite or NaN duration, or not a number
+        """
+        seconds = checks.seconds('step_for(seconds): seconds', seconds)
+        return self.step(int(round(seconds / self.step_s)))
 
     def step_until(self, condition: Callable[[], bool], *, max_steps: int,
                    what: Optional[str] = None) -> int:
@@ -273,15 +296,16 @@ class LockstepTwin:
         The condition is checked after every chunk (so the streams it reads exist).
 
         :param condition: predicate over what the harness has received
-        :param max_steps: the most steps to take
+        :param max_steps: the most steps to take (an integer >= 1)
         :param what: what is waited for, for the failure message (default: the condition)
         :return: steps taken (at least one chunk, at most ``max_steps``)
         :raises ConditionNotMet: when it does not hold after ``max_steps`` steps; the message
             names it and the twin's state at the end
         """
-        self._check_open('step_until()')
-        if max_steps < 1:
-            raise ValueError(f'step_until: max_steps must be at least 1 (got {max_steps})')
+        max_steps = checks.integer('step_until: max_steps', max_steps, 1, None)
+        if not callable(condition):
+            raise ValueError(f'step_until: condition {condition!r} is not callable')
+        self._acting('step_until()')
         taken = 0
         while taken < max_steps:
             k = min(self.chunk, max_steps - taken)
@@ -289,25 +313,32 @@ class LockstepTwin:
             taken += k
             if condition():
                 return taken
-        raise ConditionNotMet(
-            f'{what or _describe(condition)}: not met within {max_steps} steps '
-            f'({max_steps * self.step_s:g} s); at the end: {self.describe_state()}')
+        with self._failing():
+            raise ConditionNotMet(
+                f'{what or _describe(condition)}: not met within {max_steps} steps '
+                f'({max_steps * self.step_s:g} s); at the end: {self.describe_state()}')
 
     def wait_until(self, condition: Callable[[], bool], *, timeout: Optional[float] = None,
                    what: Optional[str] = None) -> None:
         """Serve callbacks without stepping until ``condition()`` holds (e.g. a controller in
         another process has answered).
 
-        :param timeout: longest wait [s] (default: the harness's timeout)
+        :param timeout: longest wait [s] (> 0; default: the harness's timeout)
         :raises ConditionNotMet: when it does not hold in time
         """
-        driver = self._check_open('wait_until()')
+        timeout = checks.seconds('wait_until: timeout', timeout, open_low=True, optional=True)
+        driver = self._acting('wait_until()')
         limit = driver.timeout if timeout is None else timeout
-        from conveyor_twin.testing.ros_env import wait_for
-        if not wait_for(condition, limit, driver.executor):
-            raise ConditionNotMet(f'{what or _describe(condition)}: not met within {limit:g} s '
-                                  f'without stepping; at the end: {self.describe_state()}'
-                                  + self._controller_report())
+        with self._failing():
+            if not wait_for(lambda: (self._supervisor.check(), condition())[1], limit,
+                            driver.executor):
+                raise ConditionNotMet(f'{what or _describe(condition)}: not met within '
+                                      f'{limit:g} s without stepping; at the end: '
+                                      f'{self.describe_state()}'
+                                      + self._supervisor.report())
+
+    def _after_chunk(self, stamp_ns: int) -> None:
+        self._supervisor.wait_paced(self._driver, stamp_ns)
 
     # -- reading -------------------------------------------------------------------------
     def _received(self, topic: str) -> List[bytes]:
@@ -324,129 +355,12 @@ class LockstepTwin:
         self._check_open('digest()')
         return self._driver.probe.digest(topic)
 
-    def belts(self) -> Dict[str, BeltState]:
-        """Latest ``belt_states``: ``{belt: BeltState}`` (empty before the first step)."""
-        data = self._received('belt_states')
-        if not data:
-            return {}
-        msg = deserialize_message(data[-1], BeltStates)
-        return {n: BeltState(c, s) for n, c, s in zip(msg.name, msg.commanded_speed, msg.speed)}
-
-    def belt(self, name: str) -> BeltState:
-        """Latest state of one belt; raise KeyError naming the known belts."""
-        return _pick(self.belts(), name, 'belt')
-
-    def belt_history(self, name: str) -> List[BeltSample]:
-        """Every ``belt_states`` entry of one belt received so far, oldest first."""
-        out = []
-        for data in self._received('belt_states'):
-            msg = deserialize_message(data, BeltStates)
-            if name not in msg.name:
-                raise KeyError(f'unknown belt {name!r} (known: {", ".join(msg.name)})')
-            i = list(msg.name).index(name)
-            out.append(BeltSample(cdr.stamp_of(data), msg.commanded_speed[i], msg.speed[i]))
-        return out
-
-    def actuators(self) -> Dict[str, ActuatorState]:
-        """Latest ``actuator_states``: ``{actuator: ActuatorState}``."""
-        data = self._received('actuator_states')
-        if not data:
-            return {}
-        msg = deserialize_message(data[-1], ActuatorStates)
-        return {n: ActuatorState(c, p) for n, c, p in
-                zip(msg.name, msg.commanded_position, msg.position)}
-
-    def actuator(self, name: str) -> ActuatorState:
-        """Latest state of one actuator; raise KeyError naming the known actuators."""
-        return _pick(self.actuators(), name, 'actuator')
-
-    def barriers(self) -> Dict[str, BarrierState]:
-        """Latest ``light_barriers``: ``{barrier: BarrierState}``."""
-        data = self._received('light_barriers')
-        if not data:
-            return {}
-        _, _, _, names, blocked, counts = cdr.decode_light_barrier_states(data[-1])
-        return {n: BarrierState(bool(b), int(c)) for n, b, c in zip(names, blocked, counts)}
-
-    def barrier(self, name: str) -> BarrierState:
-        """Latest state of one light barrier; raise KeyError naming the known barriers."""
-        return _pick(self.barriers(), name, 'light barrier')
-
-    def edges(self, *, since_step: int = 0, name: Optional[str] = None) -> List[Edge]:
-        """Light-barrier edges of steps after ``since_step``, in order (optionally one barrier's).
-
-        :param since_step: only edges that happened after this step index
-        :param name: only this barrier's edges
-        """
-        step_ns = round(self.step_s * 1e9)
-        out = []
-        for data in self._received('light_barrier_edges'):
-            msg = deserialize_message(data, LightBarrierEdge)
-            t = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
-            step = -(-t // step_ns)
-            if step > since_step and (name is None or msg.name == name):
-                out.append(Edge(msg.name, msg.blocked, msg.part_id, t, step))
-        return out
-
-    def parts(self) -> PartStates:
-        """Latest ``parts``: ids, types, poses and velocities as numpy arrays (SI units)."""
-        data = self._received('parts')
-        if not data:
-            empty = np.zeros(0)
-            return PartStates(0, self.cell.settings.frame_id, 0, empty.astype(np.uint32),
-                              empty.astype(np.uint16), *([empty] * 6))
-        return cdr.decode_part_states(data[-1])
-
-    def part(self, part_id: int) -> Optional[Dict[str, float]]:
-        """Latest pose and velocity of one micro part (None when it is not in the micro scale
-        any more: left through a sink or handed over to the macro scale)."""
-        parts = self.parts()
-        hits = np.flatnonzero(parts.id == part_id)
-        if not len(hits):
-            return None
-        i = hits[0]
-        return {f: float(getattr(parts, f)[i]) for f in ('x', 'y', 'yaw', 'vx', 'vy', 'wz')}
-
-    def densities(self) -> Dict[str, DensityGrid]:
-        """Latest ``density`` of every macro zone: ``{zone: grid}``, density shape (ny, nx)."""
-        out: Dict[str, DensityGrid] = {}
-        data = self._received('density')
-        for raw in data[-max(1, density_per_step(self.cell)):]:
-            grid = cdr.decode_density_grid(raw)
-            out[grid.zone] = grid
-        return out
-
-    def command_log(self) -> List[CommandRecord]:
-        """Every command the twin answered so far (the harness's and every controller's)."""
-        out = []
-        for data in self._received('command_status'):
-            status = deserialize_message(data, DiagnosticStatus)
-            values = {kv.key: kv.value for kv in status.values}
-            out.append(CommandRecord(status.name, status.hardware_id,
-                                     float(values.get('value', 'nan')), command_result(status)))
-        return out
-
-    def describe_state(self) -> str:
-        """One line of the twin's state as the harness last saw it (for failure messages)."""
-        if self._closed:
-            return 'closed'
-        belts = ', '.join(f'{n} {s.speed:.3g}/{s.commanded_speed:.3g} m/s'
-                          for n, s in self.belts().items())
-        actuators = ', '.join(f'{n} {s.position:.3g}/{s.commanded_position:.3g}'
-                              for n, s in self.actuators().items())
-        blocked = [n for n, s in self.barriers().items() if s.blocked]
-        rejected = [r.result.reason for r in self.command_log() if not r.result.accepted]
-        return (f'step {self.step_index} (t = {self.time:.3f} s); belts (actual/commanded): '
-                f'{belts or "-"}; actuators: {actuators or "-"}; blocked barriers: '
-                f'{", ".join(blocked) or "none"}; {len(self.parts().id)} micro parts; '
-                f'{len(self._received("light_barrier_edges"))} edges; '
-                f'{len(rejected)} rejected commands' + (f' (last: {rejected[-1]})'
-                                                        if rejected else ''))
-
     # -- acting --------------------------------------------------------------------------
     def _command(self, msg: Union[BeltCommand, ActuatorCommand], check: bool,
                  what: str) -> CommandResult:
-        result = self._check_open(what).command(msg)
+        driver = self._acting(what)
+        with self._failing():
+            result = driver.command(msg)
         if check and not result.accepted:
             raise CommandRejectedError(result.reason)
         return result
@@ -454,24 +368,31 @@ class LockstepTwin:
     def set_belt(self, belt: str, speed: float, *, check: bool = True) -> CommandResult:
         """Send ``belt_command`` and wait for the twin's answer; it takes effect at the next step.
 
+        The command carries ``sender`` ``conveyor_twin_test`` and the next ``sequence`` number;
+        the answer is the ``command_status`` that echoes both.
+
         :param belt: belt name
-        :param speed: target speed along the belt [m/s]
+        :param speed: target speed along the belt [m/s] (any real number: the twin judges it)
         :param check: raise when the twin rejects it (else return the rejection)
+        :raises ValueError: when ``speed`` is not a real number
         :raises CommandRejectedError: when rejected and ``check``; the message is the twin's
         """
-        return self._command(BeltCommand(belt=belt, speed=float(speed)), check,
-                             f'set_belt({belt!r})')
+        return self._command(BeltCommand(belt=_name('belt', belt),
+                                         speed=checks.number('speed', speed)),
+                             check, f'set_belt({belt!r})')
 
     def set_actuator(self, actuator: str, position: float, *,
                      check: bool = True) -> CommandResult:
         """Send ``actuator_command`` and wait for the twin's answer.
 
         :param actuator: actuator name
-        :param position: target position [m] (linear) or [rad] (rotary)
+        :param position: target position [m] (linear) or [rad] (rotary); any real number
         :param check: raise when the twin rejects it (else return the rejection)
+        :raises ValueError: when ``position`` is not a real number
         :raises CommandRejectedError: when rejected and ``check``
         """
-        return self._command(ActuatorCommand(actuator=actuator, position=float(position)),
+        return self._command(ActuatorCommand(actuator=_name('actuator', actuator),
+                                             position=checks.number('position', position)),
                              check, f'set_actuator({actuator!r})')
 
     def spawn(self, part_type: str, x: Sequence[float], y: Sequence[float],
@@ -482,12 +403,15 @@ class LockstepTwin:
         :param x: positions [m]
         :param y: positions [m]
         :param yaw: headings [rad] (default: 0)
-        :raises ServiceError: when the twin refuses (the message is the twin's)
+        :raises ValueError: when a pose is not a real number
+        :raises ServiceError: when the twin refuses (the message is the twin's: an unknown
+            type, a pose off the belts or outside the walls, an overlap)
         """
-        driver = self._check_open(f'spawn({part_type!r})')
-        x, y = list(np.atleast_1d(x)), list(np.atleast_1d(y))
-        yaw = [0.0] * len(x) if yaw is None else list(np.atleast_1d(yaw))
-        response = driver.spawn(part_type, x, y, yaw)
+        x, y = checks.numbers_of('x', x), checks.numbers_of('y', y)
+        yaw = [0.0] * len(x) if yaw is None else checks.numbers_of('yaw', yaw)
+        driver = self._acting(f'spawn({part_type!r})')
+        with self._failing():
+            response = driver.spawn(_name('part_type', part_type), x, y, yaw)
         if not response.success:
             raise ServiceError(f'spawn_parts refused: {response.message}')
         return np.asarray(response.id, dtype=np.uint32)
@@ -504,14 +428,17 @@ class LockstepTwin:
         :param duration: clear it after this long [s]; 0: until cleared
         :param part_type: the part type ``source_wrong_type`` delivers
         :param params: the kind's parameters [SI], e.g. ``frequency=20.0``
+        :raises ValueError: when ``duration`` or a parameter is not a real number
         :raises FaultRejectedError: when the twin refuses (the message is the twin's)
         """
         from conveyor_twin_msgs.srv import InjectFault
-        driver = self._check_open(f'inject_fault({kind!r})')
-        response = driver.inject_fault(InjectFault.Request(
-            kind=kind, target=str(target), param_names=list(params),
-            param_values=[float(v) for v in params.values()], duration=float(duration),
-            part_type=part_type))
+        duration = checks.number('duration', duration)
+        values = [checks.number(f'parameter {k}', v) for k, v in params.items()]
+        driver = self._acting(f'inject_fault({kind!r})')
+        with self._failing():
+            response = driver.inject_fault(InjectFault.Request(
+                kind=_name('kind', kind), target=str(target), param_names=list(params),
+                param_values=values, duration=duration, part_type=_name('part_type', part_type)))
         if not response.success:
             raise FaultRejectedError(response.message)
         return int(response.id)
@@ -519,9 +446,13 @@ class LockstepTwin:
     def clear_fault(self, fault_id: int) -> None:
         """Clear a fault through ``clear_fault``; it takes effect at the next step.
 
+        :param fault_id: the id :meth:`inject_fault` returned (an integer in [0, 2**32 - 1])
         :raises FaultRejectedError: when no fault of that id is active
         """
-        response = self._check_open(f'clear_fault({fault_id})').clear_fault(fault_id)
+        fault_id = checks.integer('fault_id', fault_id, 0, checks.UINT32_MAX)
+        driver = self._acting(f'clear_fault({fault_id})')
+        with self._failing():
+            response = driver.clear_fault(fault_id)
         if not response.success:
             raise FaultRejectedError(response.message)
 
@@ -535,20 +466,24 @@ class LockstepTwin:
               ) -> None:
         """Restart the twin at step 0 through ``reset``; forget every message received.
 
-        :param seed: new seed (default: the current one)
+        :param seed: new seed (default: the current one; an integer in [0, 2**64 - 1])
         :param cell_file: another cell file with the same belts, actuators and barriers
         :raises ServiceError: when the twin refuses (the message is the twin's)
         """
-        driver = self._check_open('reset()')
-        driver.settle_edges()
-        self.seed = self.seed if seed is None else seed
-        response = driver.reset(self.seed, os.fspath(cell_file) if cell_file else '')
+        if seed is not None:
+            seed = checks.integer('seed', seed, 0, checks.UINT64_MAX)
+        driver = self._acting('reset()')
+        with self._failing():
+            driver.settle_edges()
+            new_seed = self.seed if seed is None else seed
+            response = driver.reset(new_seed, os.fspath(cell_file) if cell_file else '')
         if not response.success:
             raise ServiceError(f'reset refused: {response.message}')
+        self.seed = new_seed
         if cell_file:
             self.cell = load_cell(cell_file)
-        for messages in driver.probe.received.values():
-            messages.clear()
+        driver.forget()
+        self._supervisor.forget_acks()
         self.step_index = self.time_ns = 0
 
     # -- controllers ---------------------------------------------------------------------
@@ -556,60 +491,69 @@ class LockstepTwin:
         """Attach a controller node of this process: it is spun whenever the harness waits.
 
         Create it on :attr:`context` (``MyController(context=twin.context)``); the twin
-        destroys it at :meth:`close`.
+        destroys it at :meth:`close`. An exception its callbacks raise ends the harness's
+        wait with that exception.
 
         :return: the node
         """
-        self._check_open('add_node()').executor.add_node(node)
+        self._acting('add_node()').executor.add_node(node)
         self._nodes.append(node)
         return node
 
     def start_controller(self, args: Sequence[str], *,
-                         env: Optional[Mapping[str, str]] = None) -> subprocess.Popen:
+                         env: Optional[Mapping[str, str]] = None,
+                         pace: Optional[str] = None) -> subprocess.Popen:
         """Start a controller as its own process in the twin's domain (loopback discovery);
-        it is stopped (SIGINT, SIGTERM, SIGKILL) at :meth:`close`.
+        it is stopped (SIGINT, SIGTERM, SIGKILL) at :meth:`close`. If it ends with a non-zero
+        exit code (or by a signal) before, the next call that drives the twin raises
+        :class:`~conveyor_twin.health.BackgroundFailure` naming it, its exit code and the end
+        of its output.
 
         :param args: command line, e.g. ``[sys.executable, 'my_controller.py']``
         :param env: more environment variables
+        :param pace: the name of the controller's node, if it acknowledges what it read on
+            ``lockstep_ack`` (:mod:`conveyor_twin.testing.pacing`): after every chunk the
+            harness then waits until it acknowledged the chunk's last stamp and the twin
+            answered the commands it sent before; None: not paced
         :return: the process; its output is in :meth:`controller_output`
         """
-        self._check_open('start_controller()')
-        index = len(self._controllers)
-        with open(self._log_dir / f'controller_{index}.log', 'w') as log:
-            process = self._processes.start(list(args), env=env, stdout=log,
-                                            stderr=subprocess.STDOUT)
-        self._controllers.append(process)
-        return process
+        if pace is not None and (not isinstance(pace, str) or not pace):
+            raise ValueError(f'pace = {pace!r} is not allowed: it must be the name of the '
+                             "controller's node or None")
+        driver = self._acting('start_controller()')
+        return self._supervisor.start(args, env, pace or '', driver).process
 
     def controller_output(self, index: int = 0) -> str:
-        """Return what a started controller has printed so far (stdout and stderr)."""
-        path = self._log_dir / f'controller_{index}.log'
-        return path.read_text(errors='replace') if path.exists() else ''
+        """Return what a started controller has printed so far (stdout and stderr).
 
-    def _controller_report(self) -> str:
-        lines = []
-        for i, process in enumerate(self._controllers):
-            code = process.poll()
-            state = 'running' if code is None else f'exited with {code}'
-            lines.append(f'\n--- controller {i} ({state}):\n{self.controller_output(i)[-2000:]}')
-        return ''.join(lines)
+        :param index: the controller's number in the order started (from 0)
+        """
+        self._check_open('controller_output()')
+        count = len(self._supervisor.controllers)
+        if count:
+            checks.integer('controller_output(index): index', index, 0, count - 1)
+        return self._supervisor.output(index)
 
     def wait_for_node(self, name: str, *, subscribes: Sequence[str] = (),
                       publishes: Sequence[str] = (), timeout: Optional[float] = None) -> None:
         """Wait until a node (e.g. a started controller) is discovered with the subscriptions
         and publishers given (topic names relative to the twin, e.g. ``'light_barriers'``).
 
+        :param timeout: longest wait [s] (> 0; default: the harness's timeout)
         :raises ConditionNotMet: when it is not, or a started controller exits meanwhile; the
             message carries the controllers' output
         """
+        timeout = checks.seconds('wait_for_node: timeout', timeout, open_low=True,
+                                 optional=True)
         driver = self._check_open('wait_for_node()')
         probe = driver.probe
+        controllers = self._supervisor.controllers
 
         def endpoints(infos: Any) -> bool:
             return any(i.node_name == name for i in infos)
 
         def ready() -> bool:
-            if any(p.poll() is not None for p in self._controllers):
+            if any(c.process.poll() is not None for c in controllers):
                 return True
             return (all(endpoints(probe.get_subscriptions_info_by_topic(_abs(t)))
                         for t in subscribes)
@@ -617,23 +561,24 @@ class LockstepTwin:
                             for t in publishes)
                     and name in probe.get_node_names())
 
-        self.wait_until(ready, timeout=timeout, what=f'node {name!r} discovered')
-        dead = [p for p in self._controllers if p.poll() is not None]
-        if dead:
-            raise ConditionNotMet(f'node {name!r}: a controller process exited before it was '
-                                  f'discovered{self._controller_report()}')
+        limit = driver.timeout if timeout is None else timeout
+        with self._failing():
+            if not wait_for(ready, limit, driver.executor):
+                raise ConditionNotMet(f'node {name!r} discovered: not met within {limit:g} s'
+                                      + self._supervisor.report())
+            if any(c.process.poll() is not None for c in controllers):
+                raise ConditionNotMet(f'node {name!r}: a controller process exited before it '
+                                      f'was discovered{self._supervisor.report()}')
 
 
 def _abs(topic: str) -> str:
     return topic if topic.startswith('/') else '/' + topic
 
 
-def _pick(states: Dict[str, Any], name: str, kind: str) -> Any:
-    try:
-        return states[name]
-    except KeyError:
-        known = ', '.join(states) or 'none received yet: step first'
-        raise KeyError(f'unknown {kind} {name!r} (known: {known})') from None
+def _name(what: str, value: Any) -> str:
+    if not isinstance(value, str):
+        raise ValueError(f'{what} = {value!r} is not allowed: it must be a string')
+    return value
 
 
 def _describe(condition: Callable[[], bool]) -> str:

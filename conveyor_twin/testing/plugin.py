@@ -62,8 +62,12 @@ def conveyor_twin_factory() -> Iterator[Callable[..., 'LockstepTwin']]:
     try:
         yield make
     finally:
+        # a background failure after the test's last call still fails the test
+        late = [f for f in (t.unreported_failures() for t in twins) if f is not None]
         for twin in reversed(twins):
             twin.close()
+    if late:
+        raise late[0]
 
 
 @pytest.fixture

@@ -10,12 +10,14 @@ drops the lock when the process ends, so a killed run leaves nothing stale behin
 processes); :func:`lease_domain_id` holds one until released (each test twin takes its own).
 """
 
+from contextlib import contextmanager
 import fcntl
 import os
 from pathlib import Path
 import tempfile
 import time
-from typing import Callable, Dict, IO, Mapping, Optional, TYPE_CHECKING
+import threading
+from typing import Callable, Dict, IO, Iterator, Mapping, Optional, TYPE_CHECKING
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor
@@ -112,6 +114,31 @@ def configure_session() -> int:
     os.environ.pop('ROS_LOCALHOST_ONLY', None)
     os.environ.pop('ROS_STATIC_PEERS', None)
     return domain_id
+
+
+#: rcl reads the discovery range from the environment when a context is initialised: the
+#: environment is set for that moment only, under this lock, and restored at once.
+_ENV_LOCK = threading.Lock()
+
+
+@contextmanager
+def loopback_environment() -> Iterator[None]:
+    """Loopback discovery for an rclpy context initialised inside the block; this process's
+    environment is as before once the block ends (rcl reads it at ``rclpy.init``)."""
+    names = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_LOCALHOST_ONLY', 'ROS_STATIC_PEERS')
+    with _ENV_LOCK:
+        saved = {n: os.environ.get(n) for n in names}
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        os.environ.pop('ROS_LOCALHOST_ONLY', None)
+        os.environ.pop('ROS_STATIC_PEERS', None)
+        try:
+            yield
+        finally:
+            for name, value in saved.items():
+                if value is None:
+                    os.environ.pop(name, None)
+                else:
+                    os.environ[name] = value
 
 
 def ros_subprocess_env(extra: Optional[Mapping[str, str]] = None, *,

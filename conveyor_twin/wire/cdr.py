@@ -470,19 +470,25 @@ def encode_clock(stamp_ns: int) -> bytes:
     return ENCAPSULATION_LE + _STAMP.pack(*stamp_parts(stamp_ns))
 
 
-def encode_belt_command(belt: str, speed: float) -> bytes:
-    """Return the CDR bytes of a BeltCommand message; ``speed`` [m/s]."""
-    b = _Builder()
-    b.string(belt)
-    b.f64(speed)
-    return b.message()
+def encode_belt_command(belt: str, speed: float, sender: str = '', sequence: int = 0) -> bytes:
+    """Return the CDR bytes of a BeltCommand message; ``speed`` [m/s]; ``sender`` and
+    ``sequence`` identify the command on ``command_status``."""
+    return _encode_command(belt, speed, sender, sequence)
 
 
-def encode_actuator_command(actuator: str, position: float) -> bytes:
-    """Return the CDR bytes of an ActuatorCommand message; ``position`` [m] or [rad]."""
+def encode_actuator_command(actuator: str, position: float, sender: str = '',
+                            sequence: int = 0) -> bytes:
+    """Return the CDR bytes of an ActuatorCommand message; ``position`` [m] or [rad];
+    ``sender`` and ``sequence`` identify the command on ``command_status``."""
+    return _encode_command(actuator, position, sender, sequence)
+
+
+def _encode_command(name: str, value: float, sender: str, sequence: int) -> bytes:
     b = _Builder()
-    b.string(actuator)
-    b.f64(position)
+    b.string(name)
+    b.f64(value)
+    b.string(sender)
+    b.u32(sequence)
     return b.message()
 
 
@@ -511,6 +517,10 @@ class _Reader:
             raise CdrError(msg)
         self.pos = start + size
         return start
+
+    def at_end(self) -> bool:
+        """True when no field follows (at most the padding of the last one)."""
+        return len(self.data) - self.pos < 4
 
     def scalar(self, fmt: str) -> Any:
         size = struct.calcsize(fmt)
@@ -632,27 +642,40 @@ def decode_light_barrier_states(data: bytes) -> Tuple[int, str, int, Tuple[str, 
     return stamp_ns, frame_id, step, names, blocked, edge_count
 
 
-def _decode_command(data: bytes, type_name: str) -> Tuple[str, float]:
+def _decode_command(data: bytes, type_name: str) -> Tuple[str, float, str, int]:
     r = _Reader(data, type_name)
-    return r.string(), r.scalar('d')
+    name, value = r.string(), r.scalar('d')
+    if r.at_end():  # recorded before commands carried a sender and a sequence number
+        return name, value, '', 0
+    return name, value, r.string(), r.scalar('I')
 
 
 def decode_belt_command(data: bytes) -> Tuple[str, float]:
-    """Decode a BeltCommand message.
+    """Decode a BeltCommand message (also one recorded without ``sender`` and ``sequence``).
 
     :return: ``(belt, speed)``, speed [m/s].
     :raises CdrError: on malformed data.
     """
-    return _decode_command(data, 'BeltCommand')
+    return _decode_command(data, 'BeltCommand')[:2]
 
 
 def decode_actuator_command(data: bytes) -> Tuple[str, float]:
-    """Decode an ActuatorCommand message.
+    """Decode an ActuatorCommand message (also one recorded without ``sender`` and
+    ``sequence``).
 
     :return: ``(actuator, position)``, position [m] or [rad].
     :raises CdrError: on malformed data.
     """
-    return _decode_command(data, 'ActuatorCommand')
+    return _decode_command(data, 'ActuatorCommand')[:2]
+
+
+def decode_command_origin(data: bytes, type_name: str = 'BeltCommand') -> Tuple[str, int]:
+    """Return ``(sender, sequence)`` of BeltCommand or ActuatorCommand CDR bytes (``''``, 0
+    for bytes without them).
+
+    :raises CdrError: on malformed data.
+    """
+    return _decode_command(data, type_name)[2:]
 
 
 def encode_spawn_request(part_type: str, x: Sequence[float], y: Sequence[float],

@@ -108,6 +108,8 @@ _BELTCOMMAND = (
     '\n'
     'string belt     # belt name from the cell description\n'
     "float64 speed   # target surface speed along the belt's conveying direction [m/s]\n"
+    'string sender   # who sends it (e.g. the node name), echoed on command_status; may be empty\n'
+    "uint32 sequence # the sender's number of this command, echoed on command_status; 0: none\n"
 )
 
 _BELTSTATES = (
@@ -125,6 +127,10 @@ _ACTUATORCOMMAND = (
     'string actuator     # actuator name from the cell description\n'
     "float64 position    # target position in the actuator's own unit [m]"
     ' for linear, [rad] for rotary\n'
+    'string sender       # who sends it (e.g. the node name), echoed on command_status; may be'
+    ' empty\n'
+    "uint32 sequence     # the sender's number of this command, echoed on command_status; 0:"
+    ' none\n'
 )
 
 _ACTUATORSTATES = (

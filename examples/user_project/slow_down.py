@@ -24,6 +24,7 @@ class SlowDown(Node):
         self.slow = float(self.declare_parameter('slow', 0.2).value)
         self.fast = float(self.declare_parameter('fast', 0.5).value)
         self.blocked = None
+        self.sequence = 0
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         self.command = self.create_publisher(BeltCommand, 'belt_command', qos)
         self.create_subscription(LightBarrierStates, 'light_barriers', self.on_states, qos)
@@ -34,7 +35,9 @@ class SlowDown(Node):
         if blocked != self.blocked:
             if self.blocked is not None:
                 speed = self.slow if blocked else self.fast
-                self.command.publish(BeltCommand(belt=self.belt, speed=speed))
+                self.sequence += 1  # sender and sequence come back on command_status
+                self.command.publish(BeltCommand(belt=self.belt, speed=speed,
+                                                 sender=self.get_name(), sequence=self.sequence))
             self.blocked = blocked
 
 

@@ -23,6 +23,8 @@ def test_belt_runs_slowly_while_a_part_blocks_the_barrier(conveyor_twin_factory)
     twin.step(10)
     assert twin.belt('main').commanded_speed == 0.5
     assert [r.value for r in twin.command_log()] == [0.2, 0.5]  # nobody else's commands
+    assert [(r.sender, r.sequence) for r in twin.command_log()] == [('slow_down', 1),
+                                                                    ('slow_down', 2)]
 
 
 def test_controller_as_its_own_process(conveyor_twin_factory):

@@ -63,6 +63,52 @@ def test_scheduled_commands_come_first_at_their_step(book: CommandBook) -> None:
     assert [(c.value, c.step) for c in book.drain(3)] == [(0.2, 3)]
 
 
+def test_sender_and_sequence_are_kept_through_queue_schedule_and_drain(book: CommandBook) -> None:
+    book.schedule(3, book.validate_actuator('pusher', 0.1, 'plan', 2))
+    book.submit_belt('main', 0.3, 'ctrl', 7)
+    book.submit_actuator('pusher', 0.2)                   # a command that did not say
+    drained = book.drain(3)
+    assert [(c.kind, c.value, c.step, c.sender, c.sequence) for c in drained] == [
+        ('actuator', 0.1, 3, 'plan', 2), ('belt', 0.3, 3, 'ctrl', 7),
+        ('actuator', 0.2, 3, '', 0)]
+
+
+@pytest.mark.parametrize('sender, sequence, words', [
+    (b'ctrl', 1, ["b'ctrl'", 'not a string']),
+    ('ctrl', -1, ['-1', '[0, 4294967295]']),
+    ('ctrl', 2**32, ['4294967296']),
+    ('ctrl', 1.0, ['1.0']),
+])
+def test_a_bad_sender_or_sequence_is_rejected(book: CommandBook, sender, sequence,
+                                              words: list) -> None:
+    with pytest.raises(CommandRejected) as info:
+        book.submit_belt('main', 0.1, sender, sequence)
+    assert 'belt_command' in str(info.value)
+    assert all(word in str(info.value) for word in words)
+    assert book.rejected == {'bad_origin': 1} and book.drain(1) == []
+
+
+def test_delayed_commands_keep_their_sender_and_sequence() -> None:
+    from conveyor_twin.coord.twin import Twin
+    from conveyor_twin.faults.model import FaultSpec
+    twin = Twin(load_cell(), seed=1)
+    faults = twin.fault_actuation
+    applied = []
+
+    def filter_commands(commands, step):
+        out = type(faults).filter_commands(faults, commands, step)
+        applied.extend(out)
+        return out
+
+    faults.filter_commands = filter_commands
+    twin.faults.inject(FaultSpec('belt_delay_commands', 'main', {'delay': 0.005}))
+    twin.step(1)
+    twin.commands.submit_belt('main', 0.0, 'ctrl', 7)    # drained at step 2, applied at 7
+    twin.step(6)
+    assert twin.actuation.belt_target[0] == 0.0
+    assert [(c.value, c.step, c.sender, c.sequence) for c in applied] == [(0.0, 7, 'ctrl', 7)]
+
+
 def test_belt_ramp_respects_acceleration_and_lands_exactly() -> None:
     cell = load_cell()
     act = Actuation(cell)

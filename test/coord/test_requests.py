@@ -50,3 +50,35 @@ def test_reset_keeps_or_loads_a_cell_with_the_same_interface(tmp_path) -> None:
     other.write_text(yaml.safe_dump(d))
     with pytest.raises(RequestRejected, match='needs a restart of the twin'):
         check_reset(cell, str(other))
+
+
+@pytest.mark.parametrize('x, y, text', [
+    (4.5, 0.9, "part 0 (spacer) at x = 4.5 m, y = 0.9 m is not on a belt (allowed: a centre on "
+               "belt 'main': x 0..6 m, y -0.25..0.25 m)"),
+    (-0.1, 0.0, 'is not on a belt'),
+    (6.2, 0.0, 'is not on a belt'),
+    (1.0, 0.247, "overlaps wall 'wall_left_in'"),
+    (2.9, 0.1, "overlaps deflector 'deflector'"),
+])
+def test_a_spawn_off_the_belts_or_into_an_obstacle_is_rejected(x, y, text) -> None:
+    with pytest.raises(RequestRejected) as info:
+        check_spawn(load_cell(), 'spacer', [1.0, x], [0.0, y], [])
+    assert text.replace('part 0', 'part 1') in str(info.value)
+    assert str(info.value).endswith('nothing placed')
+
+
+def test_every_shipped_cell_takes_a_part_on_each_belt_centre() -> None:
+    from pathlib import Path
+    import conveyor_twin.cell as cells
+    files = sorted((Path(cells.__file__).parent / 'examples').glob('*.yaml'))
+    assert files
+    for path in [None] + files:
+        cell = load_cell(str(path) if path else None)
+        part = min(cell.part_types, key=lambda p: p.bounding_radius)
+        for belt in cell.belts:
+            (x0, y0), (x1, y1) = belt.start, belt.end
+            xs, ys = [x0 + 0.3 * (x1 - x0)], [y0 + 0.3 * (y1 - y0)]
+            try:
+                check_spawn(cell, part.name, xs, ys, [])
+            except RequestRejected as exc:  # a belt may carry an obstacle there: say which
+                assert 'overlaps' in str(exc), (path, str(exc))

@@ -290,3 +290,17 @@ def test_vanished_parts_keep_the_multi_scale_ledger_exact():
     xc, yc = grid.grid.centres()
     inside = (xc >= 2.0) & (xc <= 2.4) & (yc >= -0.3) & (yc <= 0.3)
     assert not grid.density[inside].any()
+
+
+def test_holds_part_says_whether_a_part_id_is_in_the_micro_scale_now():
+    from conveyor_twin.faults.material import holds_part
+    from conveyor_twin.faults.model import no_such_part
+    a = build_twin(load_cell(), seed=1, layout='composed')
+    ids = a.micro.spawn(0, np.array([1.0, 1.5]), np.array([0.0, 0.0]), np.zeros(2))
+    assert all(holds_part(a.micro.sim, int(i)) for i in ids)
+    assert not holds_part(a.micro.sim, int(ids.max()) + 1)
+    assert not holds_part(a.micro.sim, 0)
+    assert str(no_such_part(77)) == (
+        "fault 'part_jam': target '77': no such part exists now (no part of that id is in the "
+        'micro scale: never placed, left through a sink, fell off, or handed over to the macro '
+        'scale)')

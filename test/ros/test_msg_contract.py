@@ -46,12 +46,14 @@ CONTRACT_MSGS: Dict[str, List[Tuple[str, str]]] = {
         ('header', 'std_msgs/Header'), ('name', 'string'), ('blocked', 'bool'),
         ('part_id', 'uint32'),
     ],
-    'BeltCommand': [('belt', 'string'), ('speed', 'float64')],
+    'BeltCommand': [('belt', 'string'), ('speed', 'float64'), ('sender', 'string'),
+                    ('sequence', 'uint32')],
     'BeltStates': [
         ('header', 'std_msgs/Header'), ('name', 'string[]'), ('commanded_speed', 'float64[]'),
         ('speed', 'float64[]'),
     ],
-    'ActuatorCommand': [('actuator', 'string'), ('position', 'float64')],
+    'ActuatorCommand': [('actuator', 'string'), ('position', 'float64'), ('sender', 'string'),
+                        ('sequence', 'uint32')],
     'ActuatorStates': [
         ('header', 'std_msgs/Header'), ('name', 'string[]'),
         ('commanded_position', 'float64[]'), ('position', 'float64[]'),

@@ -88,3 +88,28 @@ def test_split_layout_needs_a_cell_file():
         LockstepTwin(quiet_cell(), layout='split')
     with pytest.raises(ValueError, match="layout 'both' is not one of composed, split"):
         LockstepTwin(layout='both')
+
+
+def test_command_status_echoes_the_sender_and_sequence_of_each_command(conveyor_twin):
+    from conveyor_twin_msgs.msg import BeltCommand
+    from diagnostic_msgs.msg import DiagnosticStatus
+    import rclpy
+    from rclpy.serialization import deserialize_message
+
+    from conveyor_twin.ros.qos import COMMAND_QOS
+
+    twin = conveyor_twin
+    other = twin.add_node(rclpy.create_node('other_controller', context=twin.context))
+    publisher = other.create_publisher(BeltCommand, 'belt_command', COMMAND_QOS)
+    twin.wait_until(lambda: publisher.get_subscription_count() > 0, what='discovery')
+    publisher.publish(BeltCommand(belt='main', speed=0.3))               # an old controller
+    publisher.publish(BeltCommand(belt='main', speed=0.3, sender='other', sequence=41))
+    assert twin.set_belt('main', 0.3).accepted                            # the same command
+    twin.step(1)
+    records = sorted((r.sender, r.sequence, r.value) for r in twin.command_log())
+    assert records == [('', 0, 0.3), ('conveyor_twin_test', 1, 0.3), ('other', 41, 0.3)]
+    status = deserialize_message(twin.messages('command_status')[-1], DiagnosticStatus)
+    values = {kv.key: kv.value for kv in status.values}
+    assert set(values) == {'value', 'step', 'sender', 'sequence'}
+    assert twin.set_actuator('pusher', 0.1).step == 1
+    assert twin.command_log()[-1][4:] == ('conveyor_twin_test', 2)

@@ -113,8 +113,8 @@ def test_spawn_refuses_parts_outside_the_cell(twin):
     with pytest.raises(ServiceError) as refused:
         twin.spawn('spacer', [1.0, 1e6], [0.0, 1e6])
     message = str(refused.value)
-    assert 'entries [1] lie outside the cell' in message, message
-    assert 'x = 1e+06 m, y = 1e+06 m' in message and 'nothing placed' in message
+    assert 'part 1 (spacer) at x = 1e+06 m, y = 1e+06 m is not on a belt' in message, message
+    assert "allowed: a centre on belt 'main'" in message and 'nothing placed' in message
     twin.step(1)
     assert len(twin.parts().id) == 0
     assert len(twin.spawn('spacer', [1.0], [0.0])) == 1

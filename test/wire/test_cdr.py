@@ -171,10 +171,28 @@ def test_commands_round_trip(name):
             (cdr.encode_actuator_command, cdr.decode_actuator_command,
              'conveyor_twin_msgs/msg/ActuatorCommand', ('actuator', 'position'))):
         data = encode(name, -0.75)
-        assert data == serialize(type_name, {field[0]: name, field[1]: -0.75})[0]
+        assert data == serialize(type_name, {field[0]: name, field[1]: -0.75, 'sender': '',
+                                             'sequence': 0})[0]
         assert decode(data) == (name, -0.75)
         decoded = mcap_decode(type_name, data)
         assert getattr(decoded, field[0]) == name
+        data = encode(name, 1.5, 'controller_' + name, 4_000_000_000)
+        assert data == serialize(type_name, {field[0]: name, field[1]: 1.5,
+                                             'sender': 'controller_' + name,
+                                             'sequence': 4_000_000_000})[0]
+        assert decode(data) == (name, 1.5)
+        short = type_name.rsplit('/', 1)[1]
+        assert cdr.decode_command_origin(data, short) == ('controller_' + name, 4_000_000_000)
+        assert mcap_decode(type_name, data).sequence == 4_000_000_000
+
+
+def test_commands_recorded_without_sender_and_sequence_decode():
+    # the bytes of a command as recordings made before the two fields hold them
+    old = b'\x00\x01\x00\x00' + b'\x05\x00\x00\x00main\x00' + b'\x00' * 7 + \
+        struct.pack('<d', 0.25)
+    assert cdr.decode_belt_command(old) == ('main', 0.25)
+    assert cdr.decode_command_origin(old) == ('', 0)
+    assert cdr.decode_actuator_command(old) == ('main', 0.25)
 
 
 def test_decode_command_big_endian():

@@ -86,6 +86,14 @@ def test_commands_and_clock():
     wire = serialization.serialize_message(msgs.BeltCommand(belt='main', speed=0.75))
     assert cdr.decode_belt_command(wire) == ('main', 0.75)
     assert_same_bytes(cdr.encode_belt_command('main', 0.75), wire)
+    wire = serialization.serialize_message(msgs.BeltCommand(belt='main', speed=0.75,
+                                                            sender='ctl', sequence=7))
+    assert cdr.decode_command_origin(wire) == ('ctl', 7)
+    assert_same_bytes(cdr.encode_belt_command('main', 0.75, 'ctl', 7), wire)
+    wire = serialization.serialize_message(msgs.ActuatorCommand(actuator='dv', position=1.0,
+                                                                sender='c', sequence=1))
+    assert cdr.decode_command_origin(wire, 'ActuatorCommand') == ('c', 1)
+    assert_same_bytes(cdr.encode_actuator_command('dv', 1.0, 'c', 1), wire)
     wire = serialization.serialize_message(msgs.ActuatorCommand(actuator='dv', position=-1.5))
     assert cdr.decode_actuator_command(wire) == ('dv', -1.5)
     assert_same_bytes(cdr.encode_actuator_command('dv', -1.5), wire)
