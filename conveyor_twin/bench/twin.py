@@ -16,7 +16,10 @@ stamped by the middleware's receive thread when the sample arrives), so the meas
 costs little CPU on a 2-core machine and its own Python scheduling does not enter the
 inter-arrival figures; ``callback`` runs one rclpy callback per message (EventsExecutor) and
 times it on arrival in Python, as a controller written with callbacks would see the streams.
-Both readers keep 1000 samples per stream, so "lost" counts what the twin did not deliver.
+Both readers keep 1000 samples per stream, so "lost" counts what the twin did not deliver;
+the measuring process runs under SCHED_FIFO (``--reader-priority``, below the twin's threads)
+where permitted, so that other work on a loaded machine does not make it fall 100 messages
+behind the twin's reliable streams (their history) or miss best-effort ``/clock`` samples.
 - overruns and step times from the twin's ``diagnostics`` (1 Hz) during the window, and the
   twin's closing summary.
 
@@ -25,6 +28,12 @@ no work) runs for ``--floor-window`` seconds before the first twin window and af
 window, so floor and twin windows interleave; the twin's overruns per minute are reported as a
 ratio to those of the floor windows beside it (1: the twin loses no deadline the machine would
 have kept; the floor's own overruns are time the kernel or the hypervisor took from any loop).
+
+``--rounds N`` repeats the twin windows (each with its floor windows around it) and ends with
+a summary per layout or variant: the twin/floor ratio of every round and their median, the
+messages lost per stream in all rounds, and the machine's load average (1 min) during each
+window. The twin and its subscriber run in a ROS domain of their own (claimed like the test
+suite's), so another twin on the machine cannot mix into the figures.
 
 ``--foxglove``: every round runs the composed twin three times side by side: without a
 Foxglove view, with a view no client watches, and with a view and one client
@@ -48,17 +57,20 @@ from typing import Dict, List, Optional
 import numpy as np
 
 from conveyor_twin.bench.cpu import cpu_times, steal_percent
+from conveyor_twin.bench.twin_rounds import print_rounds, rounds_summary, STEP_NS, STREAMS
 
 DEFAULT_DURATION = 60.0   # s measured
 DEFAULT_PARTS = 1000
 DEFAULT_SETTLE = 3.0      # s between placing the parts and measuring
 DEFAULT_BELT_SPEED = 0.05  # m/s: 1000 parts stay on the 6 m belt for a minute
-STREAMS = ('parts', 'light_barriers', 'belt_states', 'actuator_states', '/clock')
 CONNECT_TIMEOUT = 60.0    # s for the twin to appear
+STEPPING_TIMEOUT = 300.0  # s for it to step (a realtime twin loads its kernels first)
 RESULT_PREFIX = 'bench twin subscriber: '
-STEP_NS = 1_000_000
 POLL_PERIOD = 0.002   # s between two passes of the polling reader
 READER_DEPTH = 1000    # samples each reader keeps
+#: SCHED_FIFO priority of the measuring process: below the twin's stepping (10) and helper
+#: (9) threads; it polls every 2 ms and uses about a tenth of a core.
+READER_PRIORITY = 5
 
 
 def lattice(n: int, *, x0: float = 0.3, y_half: float = 0.2, pitch_y: float = 0.04,
@@ -69,6 +81,27 @@ def lattice(n: int, *, x0: float = 0.3, y_half: float = 0.2, pitch_y: float = 0.
     x = x0 + (k // rows) * pitch_x
     y = -y_half + (k % rows) * pitch_y
     return np.stack([x, y])
+
+
+def free_places(xy: np.ndarray, part_type: str = 'spacer') -> np.ndarray:
+    """Return the places of ``xy`` (2 x n) where a part of ``part_type`` may be spawned on the
+    default cell: on a belt, clear of every wall, deflector and peg."""
+    from conveyor_twin.cell import load_cell
+    from conveyor_twin.coord.requests import placement_problem
+    cell = load_cell(None)
+    radius = cell.part_types[cell.part_type_index(part_type)].bounding_radius
+    keep = [not placement_problem(cell, float(x), float(y), radius) for x, y in xy.T]
+    return xy[:, np.asarray(keep, bool)]
+
+
+def refused_entries(message: str) -> List[int]:
+    """Return the indices of the request's entries a refused ``spawn_parts`` names: ``entries
+    [i, j]`` (overlapping parts) or ``part i (...)`` (a static obstacle); [] if none."""
+    listed = re.search(r'entries \[([0-9, ]+)\]', message)
+    if listed is not None:
+        return [int(i) for i in listed.group(1).split(',')]
+    single = re.match(r'part (\d+) \(', message)
+    return [int(single.group(1))] if single is not None else []
 
 
 def quiet_cell_file(directory: str) -> str:
@@ -108,7 +141,11 @@ def subscriber_main(argv: List[str]) -> int:
     p.add_argument('--settle', type=float, default=DEFAULT_SETTLE)
     p.add_argument('--belt-speed', type=float, default=DEFAULT_BELT_SPEED)
     p.add_argument('--reader', choices=('poll', 'callback'), default='poll')
+    p.add_argument('--priority', type=int, default=0)
     args = p.parse_args(argv)
+    if args.priority > 0:  # before any thread starts: the middleware's threads inherit it
+        from conveyor_twin.coord.runner import raise_thread_priority
+        raise_thread_priority(args.priority)
 
     import rclpy
     from rclpy.context import Context
@@ -136,7 +173,10 @@ def subscriber_main(argv: List[str]) -> int:
     arrivals = {t: ([], []) for t in STREAMS}
     diagnostics: List[Dict[str, str]] = []
 
-    def on_raw(data: bytes, log) -> None:
+    seen = {t: 0 for t in STREAMS}  # samples taken per stream (does the twin step yet?)
+
+    def on_raw(data: bytes, log, topic: str = '') -> None:
+        seen[topic] = seen.get(topic, 0) + 1
         if recording[0]:
             log[0].append(time.monotonic_ns())
             log[1].append(int.from_bytes(data[4:8], 'little') * 1_000_000_000
@@ -153,19 +193,21 @@ def subscriber_main(argv: List[str]) -> int:
     # the polling reader's subscriptions belong to a node no executor serves: only take() reads
     readers = Node('bench_twin_reader', context=context) if args.reader == 'poll' else node
     subs = [readers.create_subscription(types[t], t,
-                                        lambda d, log=arrivals[t]: on_raw(d, log),
+                                        lambda d, log=arrivals[t], t=t: on_raw(d, log, t),
                                         reader_qos(t), raw=True)
             for t in STREAMS]
-    polled = list(zip(subs, (arrivals[t] for t in STREAMS))) if args.reader == 'poll' else []
+    polled = (list(zip(subs, STREAMS, (arrivals[t] for t in STREAMS)))
+              if args.reader == 'poll' else [])
 
     def take_all() -> None:
         """Take every queued sample of every stream; time it by its DDS reception."""
-        for sub, log in polled:
+        for sub, topic, log in polled:
             handle, msg_type = sub.handle, sub.msg_type
             while True:
                 taken = handle.take_message(msg_type, True)
                 if taken is None:
                     break
+                seen[topic] += 1
                 if recording[0]:
                     data, info = taken
                     log[0].append(info['received_timestamp'])
@@ -197,14 +239,14 @@ def subscriber_main(argv: List[str]) -> int:
     belt.publish(BeltCommand(belt='main', speed=args.belt_speed))
     belt.wait_for_all_acked(Duration(seconds=10))
     placed = 0
-    xy = lattice(2 * args.parts)  # spare places: some lattice points hit the deflector
+    xy = free_places(lattice(2 * args.parts))  # spare places: some hit the deflector
     start = 0
     while placed < args.parts and start < xy.shape[1]:
         # a few calls of up to 250 parts; each places its parts at one step boundary
         chunk = xy[:, start:start + min(250, args.parts - placed)]
         start += chunk.shape[1]
         keep = np.ones(chunk.shape[1], bool)
-        for _ in range(3):  # drop the places the twin refuses (overlaps) and try again
+        for _ in range(10):  # drop the places the twin refuses (overlaps) and try again
             future = spawn.call_async(SpawnParts.Request(
                 part_type='spacer', x=chunk[0, keep].tolist(), y=chunk[1, keep].tolist(),
                 yaw=[0.0] * int(keep.sum())))
@@ -213,12 +255,18 @@ def subscriber_main(argv: List[str]) -> int:
             if response is not None and response.success:
                 placed += len(response.id)
                 break
-            refused = re.search(r'entries \[([0-9, ]+)\]', response.message if response else '')
-            if refused is None:
+            refused = refused_entries(response.message if response else '')
+            if not refused:
                 print(f'bench twin: spawn failed: {response}', file=sys.stderr)
                 break
-            indices = np.flatnonzero(keep)[[int(i) for i in refused.group(1).split(',')]]
-            keep[indices] = False
+            keep[np.flatnonzero(keep)[refused]] = False
+    # the twin serves its services before it steps (a realtime twin first loads its kernels):
+    # measure only once every stream flows
+    seen.update({t: 0 for t in STREAMS})
+    if not spin_for(STEPPING_TIMEOUT, lambda: all(seen.values())):
+        print(f'bench twin: the twin did not publish every stream within {STEPPING_TIMEOUT:g} '
+              f's: {seen}', file=sys.stderr)
+        return 1
     freeze_heap()  # no full collections of this process's heap during the window
     spin_for(args.settle)
     take_all()  # what queued before the window is not measured
@@ -288,6 +336,8 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str,
     cpu_before = cpu_times()
     env = dict(os.environ)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    if getattr(args, 'domain_id', None) is not None:
+        env['ROS_DOMAIN_ID'] = str(args.domain_id)
     cell = quiet_cell_file(directory)
     twin_cmd = [sys.executable, '-m', 'conveyor_twin.cli', 'run', '--cell', cell,
                 '--mode', 'realtime', '--duration', '0', '--json', '--quiet',
@@ -304,7 +354,8 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str,
     sub = subprocess.Popen(
         [sys.executable, '-m', 'conveyor_twin.bench.twin', '--subscriber', '--parts',
          str(args.parts), '--duration', str(args.duration), '--settle', str(args.settle),
-         '--belt-speed', str(args.belt_speed), '--reader', args.reader], env=env,
+         '--belt-speed', str(args.belt_speed), '--reader', args.reader, '--priority',
+         str(args.reader_priority)], env=env,
         stdout=subprocess.PIPE, text=True)
     if foxglove == 'client':
         client = subprocess.Popen([sys.executable, '-m', 'conveyor_twin.bench.foxglove_client',
@@ -340,7 +391,8 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str,
         if line.startswith('{'):
             summary = json.loads(line)
     figures: Dict[str, object] = {'layout': 'split' if split else 'composed',
-                                  'steal_percent': steal_percent(cpu_before, cpu_times())}
+                                  'steal_percent': steal_percent(cpu_before, cpu_times()),
+                                  'load_average': round(os.getloadavg()[0], 2)}
     if foxglove:
         figures['foxglove'] = foxglove
         if client is not None:
@@ -348,7 +400,7 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str,
     twin_log.seek(0)
     log = twin_log.read()
     twin_log.close()
-    if ended_early or 'error' in log.lower():
+    if ended_early or 'error' in log.lower() or result is None:
         figures['twin_ended_early'] = ended_early
         figures['twin_log_tail'] = log[-2000:]
     if result is None:
@@ -414,8 +466,8 @@ def _print(figures: Dict[str, object]) -> None:
     print(f"{figures['layout']}{variant}: {figures.get('placed_parts')} parts placed, window "
           f"{figures.get('window_s')} s, micro parts in flight "
           f"{figures.get('micro_in_flight')}, CPU stolen by the hypervisor "
-          f"{figures.get('steal_percent')} %; {figures.get('reader')} reader using "
-          f"{figures.get('subscriber_cpu_share')} of a core")
+          f"{figures.get('steal_percent')} %, load average {figures.get('load_average')}; "
+          f"{figures.get('reader')} reader using {figures.get('subscriber_cpu_share')} of a core")
     if 'error' in figures:
         print(f"  error: {figures['error']}")
         return
@@ -463,6 +515,10 @@ def main(argv: List[str]) -> int:
     p.add_argument('--reader', choices=('poll', 'callback'), default='poll',
                    help='poll: take all queued samples every 2 ms, timed by DDS reception; '
                         'callback: one rclpy callback per message, timed in Python')
+    p.add_argument('--reader-priority', type=int, default=READER_PRIORITY,
+                   help='SCHED_FIFO priority of the measuring process, below the twin\'s '
+                        'threads, so that other work on the machine cannot make it miss '
+                        'messages the twin sent (0: normal scheduling)')
     p.add_argument('--markers-rate', type=float, default=30.0,
                    help="the twin's MarkerArray rate [Hz] (0: none)")
     p.add_argument('--floor-window', type=float, default=30.0,
@@ -480,7 +536,9 @@ def main(argv: List[str]) -> int:
         layouts = [(False, ''), (False, 'view'), (False, 'client')]
     results = []
     floor_window = {'seconds': args.floor_window}
-    with tempfile.TemporaryDirectory() as directory:
+    from conveyor_twin.bench.soak import claim_domain_id
+    args.domain_id, domain_lock = claim_domain_id()  # held until the bench ends
+    with domain_lock, tempfile.TemporaryDirectory() as directory:
         before = floor_figures(floor_window)
         for _ in range(max(1, args.rounds)):
             for split, foxglove in layouts:
@@ -492,10 +550,13 @@ def main(argv: List[str]) -> int:
                 if not args.json:
                     _print(figures)
     comparison = foxglove_comparison(results) if args.foxglove else None
+    summary = rounds_summary(results)
     if args.json:
         print(json.dumps({'parts': args.parts, 'duration_s': args.duration,
-                          'layouts': results, 'foxglove': comparison}))
-    elif comparison is not None:
+                          'layouts': results, 'foxglove': comparison, 'rounds': summary}))
+        return 0
+    print_rounds(summary)
+    if comparison is not None:
         means, ratios = comparison['step_time_mean_ms'], comparison['ratio_to_none']
         print('Foxglove, side by side (median over rounds of the step-time mean): '
               + ', '.join(f'{v} {means[v]:.4f} ms (ratio {ratios.get(v, "n/a")})'

@@ -80,11 +80,29 @@ class StepStats:
 
     @staticmethod
     def _summary(values: np.ndarray) -> Dict[str, float]:
-        if values.size == 0:
+        """Mean, median, p99 (linear interpolation, as ``np.percentile``) and max [ms].
+
+        One partial sort for the three order statistics: the diagnostics call this on the
+        stepping thread, where ``np.median`` and ``np.percentile`` cost ~0.3 ms with cold
+        caches.
+        """
+        n = values.size
+        if n == 0:
             return {'mean_ms': 0.0, 'p50_ms': 0.0, 'p99_ms': 0.0, 'max_ms': 0.0}
-        ms = values * 1e3
-        return {'mean_ms': float(ms.mean()), 'p50_ms': float(np.median(ms)),
-                'p99_ms': float(np.percentile(ms, 99)), 'max_ms': float(ms.max())}
+        ranks = {}
+        for q in (0.5, 0.99):
+            lo = int(q * (n - 1))
+            ranks[q] = (lo, min(lo + 1, n - 1), q * (n - 1) - lo)
+        ordered = np.partition(values, sorted({r for lo, hi, _ in ranks.values()
+                                               for r in (lo, hi)} | {n - 1}))
+
+        def rank(q: float) -> float:
+            lo, hi, frac = ranks[q]
+            a, b = float(ordered[lo]), float(ordered[hi])
+            return (a + (b - a) * frac) * 1e3
+
+        return {'mean_ms': float(values.mean()) * 1e3, 'p50_ms': rank(0.5),
+                'p99_ms': rank(0.99), 'max_ms': float(ordered[n - 1]) * 1e3}
 
     def window(self) -> Dict[str, float]:
         """Mean, median, p99 and max [ms] over the last window of steps."""

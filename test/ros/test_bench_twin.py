@@ -2,7 +2,8 @@
 
 The figures themselves (rates, overruns) depend on the machine and are not asserted; what is
 pinned is that the benchmark places its parts, measures all five streams in sim-time order with
-either reader, and reports the reader's own CPU share.
+either reader, reports the reader's own CPU share, and sums the rounds up: the twin/floor ratio
+of each round, their median and the messages lost per stream.
 """
 
 import json
@@ -11,7 +12,7 @@ import sys
 
 import pytest
 
-from conveyor_twin.bench.twin import STREAMS
+from conveyor_twin.bench.twin import free_places, lattice, refused_entries, STREAMS
 from conveyor_twin.testing import ros_subprocess_env
 
 
@@ -39,3 +40,28 @@ def test_bench_twin_measures_every_stream(reader):
     windows = figures['floor']['windows']
     assert [w['steps'] for w in windows] == [500, 500], windows
     assert figures['overruns_per_min'] >= 0 and figures['floor']['overruns_per_min'] >= 0
+    assert figures['load_average'] >= 0.0
+    # the summary over rounds: the ratio of every round and their median, losses per stream
+    (summary,) = report['rounds'].values()
+    assert len(summary['ratios']) == 1 and summary['errors'] == 0
+    ratio = summary['ratios'][0]
+    assert summary['median_ratio'] == (None if ratio is None else pytest.approx(ratio))
+    assert set(summary['lost']) == set(STREAMS)  # /clock included
+    assert summary['lost_total'] == sum(summary['lost'].values())
+    assert summary['lost'] == {t: s['lost'] for t, s in figures['streams'].items()}
+
+
+def test_refused_entries_of_both_messages():
+    assert refused_entries('overlap: entries [3, 5] overlap a part') == [3, 5]
+    assert refused_entries("part 17 (spacer) at x = 2.79 m, y = 0.2 m overlaps deflector "
+                           "'deflector'; nothing placed") == [17]
+    assert refused_entries('capacity exhausted') == []
+
+
+def test_free_places_are_accepted_by_the_spawn_check():
+    from conveyor_twin.cell import load_cell
+    from conveyor_twin.coord.requests import check_spawn
+    xy = lattice(2000)  # as the benchmark's 1000 parts: up to x = 5.7 m
+    free = free_places(xy)
+    assert 0 < free.shape[1] < xy.shape[1]  # the lattice crosses the deflector
+    check_spawn(load_cell(None), 'spacer', free[0], free[1], [])  # raises if one is refused
