@@ -1,14 +1,20 @@
 """Packaging of conveyor_twin: an ament_python package, also installable with pip."""
 
 from glob import glob
+from pathlib import Path
+import re
 
 from setuptools import find_packages, setup
 
 PACKAGE_NAME = 'conveyor_twin'
+# The one place of the version: conveyor_twin/__init__.py (read, not imported).
+VERSION = re.search(r"^__version__ = '([^']+)'$",
+                    (Path(__file__).parent / PACKAGE_NAME / '__init__.py').read_text(),
+                    re.M).group(1)
 
 setup(
     name=PACKAGE_NAME,
-    version='0.1.0',
+    version=VERSION,
     packages=find_packages(exclude=['test', 'test.*']),
     # Files read at run time through importlib.resources (the embedded default cell), the example
     # cells and the PEP 561 marker.

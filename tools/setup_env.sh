@@ -158,19 +158,28 @@ else
     mkdir -p "$MSG_BUILD"
     log="$MSG_BUILD/build.log"
     jobs=${JOBS:-$(nproc 2> /dev/null || echo 2)}
-    # The wheels are found through the venv prefix; nothing of a system ROS is used.
+    # The wheels are found through the venv prefix; nothing of a system ROS is used. The
+    # libraries are built as for a wheel (tools/build_wheel.py reuses this build): within the
+    # manylinux_2_28 policy (tools/wheelbuild/glibcxx_compat.cpp), without source paths.
+    compat="$MSG_BUILD/libglibcxx_compat.a"
+    prefix_map="-ffile-prefix-map=$MSG_BUILD=. -ffile-prefix-map=$ROOT=."
     if ! (
         export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
         unset PYTHONPATH
-        cmake -S "$ROOT/msg_defs" -B "$MSG_BUILD" \
+        "$cxx_found" -fPIC -O2 -c "$ROOT/tools/wheelbuild/glibcxx_compat.cpp" \
+            -o "$MSG_BUILD/glibcxx_compat.o" && ar rcs "$compat" "$MSG_BUILD/glibcxx_compat.o" \
+        && cmake -S "$ROOT/msg_defs" -B "$MSG_BUILD" \
             -DCMAKE_INSTALL_PREFIX="$VENV" \
             -DCMAKE_BUILD_TYPE=Release \
             -DBUILD_TESTING=OFF \
             -DCMAKE_C_COMPILER="$cc_found" \
             -DCMAKE_CXX_COMPILER="$cxx_found" \
             -DPython3_EXECUTABLE="$VENV/bin/python" \
-            -DPython3_FIND_VIRTUALENV=ONLY
-        make -C "$MSG_BUILD" -j"$jobs" install
+            -DPython3_FIND_VIRTUALENV=ONLY \
+            -DCMAKE_C_FLAGS="$prefix_map" -DCMAKE_CXX_FLAGS="$prefix_map" \
+            -DCMAKE_CXX_STANDARD_LIBRARIES="$compat" \
+            -DCMAKE_SHARED_LINKER_FLAGS=-Wl,--exclude-libs,libglibcxx_compat.a \
+        && make -C "$MSG_BUILD" -j"$jobs" install
     ) < /dev/null > "$log" 2>&1; then
         tail -n 40 "$log" >&2
         die "building msg_defs/ failed; full log: $log"

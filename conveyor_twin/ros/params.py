@@ -7,6 +7,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from conveyor_twin import __version__
 from conveyor_twin.contract import DIAGNOSTICS_PERIOD_STEPS  # noqa: F401 - used by the nodes
 from conveyor_twin.coord.timing import TimeMode
 
@@ -41,9 +42,9 @@ def declare_twin_parameters(node: Node, *, step_s: float = 1e-3) -> TwinParamete
 
     Every node of the twin (``scale_coordinator``, ``micro_simulator``, ``macro_simulator``)
     declares them, so ``ros2 param list/describe/get`` show the run's knobs on each. They are
-    read once at start (read only); ``namespace``, ``stream_rate`` and ``diagnostics_rate``
-    only report (the namespace is set by ``--namespace`` or ``-r __ns:=...``, the rates follow
-    the cell's step).
+    read once at start (read only); ``namespace``, ``stream_rate``, ``diagnostics_rate`` and
+    ``version`` only report (the namespace is set by ``--namespace`` or ``-r __ns:=...``, the
+    rates follow the cell's step).
 
     :param step_s: the cell's step [s], for the reported rates.
     """
@@ -73,6 +74,7 @@ def declare_twin_parameters(node: Node, *, step_s: float = 1e-3) -> TwinParamete
             ignore_override=True)
     declare('diagnostics_rate', 1.0 / (DIAGNOSTICS_PERIOD_STEPS * step_s),
             'rate of `diagnostics` in sim time [Hz]', ignore_override=True)
+    declare('version', __version__, 'version of conveyor_twin', ignore_override=True)
     try:
         time_mode = TimeMode(mode)
     except ValueError:
