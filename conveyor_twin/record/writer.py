@@ -222,12 +222,19 @@ class McapRecorder:
             self._stream = open(self.path, 'wb')
         except OSError as err:
             raise RecordingError(f'cannot create recording {self.path}: {err}') from None
-        self._file = McapFile(self._stream, profile='ros2', library=LIBRARY,
-                              compression=_COMPRESSIONS[compression], chunk_size=chunk_size)
-        self._file.add_metadata('conveyor_twin', self._info)
-        if cell_yaml is not None:
-            self._file.add_attachment('cell.yaml', 'application/yaml', cell_yaml.encode())
-        self._stream.flush()
+        try:  # the header, metadata and cell: a full disk shows here, before any step
+            self._file = McapFile(self._stream, profile='ros2', library=LIBRARY,
+                                  compression=_COMPRESSIONS[compression], chunk_size=chunk_size)
+            self._file.add_metadata('conveyor_twin', self._info)
+            if cell_yaml is not None:
+                self._file.add_attachment('cell.yaml', 'application/yaml', cell_yaml.encode())
+            self._stream.flush()
+        except OSError as err:
+            try:
+                self._stream.close()
+            except OSError:
+                pass  # closing flushes the same bytes again; the error below says why
+            raise RecordingError(f'cannot write recording {self.path}: {err}') from None
         self.add_topic(ACCEPTED_BELT_COMMANDS, 'conveyor_twin_msgs/msg/BeltCommand',
                        essential=True)
         self.add_topic(ACCEPTED_ACTUATOR_COMMANDS, 'conveyor_twin_msgs/msg/ActuatorCommand',

@@ -100,6 +100,7 @@ def test_selection_decimation_and_drops_are_counted(tmp_path, ros_processes, ros
     (['--record', 'x.mcap', '--record-topics', 'nope'], 'not a contract topic'),
     (['--record', 'x.mcap', '--record-decimate', 'parts=0'], 'NAME=K'),
     (['--record', '/nonexistent/dir/x.mcap'], 'cannot create recording'),
+    (['--record', '/dev/full'], 'cannot write recording /dev/full'),  # a full disk
     (['--split', '--record', 'x.mcap'], 'composed layout'),
 ])
 def test_bad_options_are_clear_errors(tmp_path, capfd, args, message):
