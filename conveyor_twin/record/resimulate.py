@@ -8,7 +8,12 @@ output), schedules the commands at their steps, collects the frames the output b
 steps the core on demand while reading the recording in file order: the recorded message with
 sequence number ``s`` on a topic is compared with the ``s``-th message of that topic in the
 re-run's frames (sequence numbers count every message offered, so decimation and queue drops
-only skip).
+only skip). A closed recording is read in log-time order, which within a step need not be the
+order of the sequence numbers: a step's ``light_barrier_edges`` are published micro barriers
+first, then those in macro zones, then those of faults, each stamped with its own time. So the
+re-run's messages are matched by their number, whatever the order they are read in; one is
+dropped unmatched only once a message of its topic with a later number, stamped more than a step
+after it, has been read (no recorded message can match it then).
 
 ``markers`` are matched by their stamp, not their number: the micro node builds them off the
 stepping thread and, under load, publishes only the latest due one, so which steps have markers
@@ -328,18 +333,30 @@ def _build_markers(rerun: _Rerun, cell: Any, markers_rate: float) -> Dict[int, b
 
 
 class _Collector:
-    """A frame sink keeping every message of the re-run by topic, numbered as recorded."""
+    """A frame sink keeping every message of the re-run by topic as (number as recorded,
+    stamp [ns], bytes), in the order of the numbers."""
 
     def __init__(self, names: Dict[Any, str]) -> None:
         self.names = names
-        self.produced: Dict[str, Deque[Tuple[int, bytes]]] = {}
+        self.produced: Dict[str, Deque[Tuple[int, int, bytes]]] = {}
         self.counters: Counter = Counter()
 
     def on_frame(self, frame: Any) -> None:
-        for topic, _, data in frame.messages():
+        for topic, stamp, data in frame.messages():
             name = self.names[topic]
             self.counters[name] += 1
-            self.produced.setdefault(name, deque()).append((self.counters[name], data))
+            self.produced.setdefault(name, deque()).append((self.counters[name], stamp, data))
+
+
+def _take(queue: Deque[Tuple[int, int, bytes]], sequence: int) -> Optional[bytes]:
+    """Remove and return the bytes of message ``sequence`` of ``queue`` (None: not in it)."""
+    for i, (number, _, data) in enumerate(queue):
+        if number == sequence:
+            del queue[i]
+            return data
+        if number > sequence:
+            break
+    return None
 
 
 def _compare(path: str, rerun: _Rerun, namespace: str, step_ns: int, report: ResimReport,
@@ -371,10 +388,13 @@ def _compare(path: str, rerun: _Rerun, namespace: str, step_ns: int, report: Res
             continue
         queue = produced.setdefault(m.topic, deque())
         limit = step + 2
+        # an earlier number stamped over a step before this message is never read after it:
+        # the recording was decimated or dropped it (a step's edges may come in any order)
+        stale = m.log_time - step_ns
         while True:
-            while queue and queue[0][0] < m.sequence:
+            while queue and queue[0][0] < m.sequence and queue[0][1] < stale:
                 queue.popleft()
-            if queue or core.step_index > limit:
+            if collector.counters[m.topic] >= m.sequence or core.step_index > limit:
                 break
             for type_index, x, y, yaw in spawns.pop(core.step_index, ()):
                 rerun.micro.spawn(type_index, x, y, yaw)
@@ -383,13 +403,13 @@ def _compare(path: str, rerun: _Rerun, namespace: str, step_ns: int, report: Res
             for other in produced.values():  # keep memory bounded on topics not recorded
                 while len(other) > 10000:
                     other.popleft()
-        if not queue or queue[0][0] != m.sequence:
+        data = _take(queue, m.sequence)
+        if data is None:
             report.difference = Difference(
                 m.topic, m.sequence, step, m.log_time, None, '',
                 f'the re-run published no message #{m.sequence} on {m.topic} by step '
                 f'{core.step_index}', '')
             return
-        _, data = queue.popleft()
         if data != m.data:
             name, recorded, resimulated = _field_difference(specs[m.topic].type_name, m.data,
                                                             data)
