@@ -16,26 +16,22 @@ placement. A 3D panel that follows the plant frame shows the whole plant in one 
 cannot publish (command a cell on its own ``/<cell>/belt_command`` topic over ROS).
 """
 
-from collections import deque
 import dataclasses
 import math
-import threading
-import time
-from typing import Callable, Deque, Dict, List, Optional, Tuple
-
-import numpy as np
+from typing import Dict, List, Optional, Tuple
 
 from conveyor_twin import contract as streams_contract
 from conveyor_twin.health import Health
 from conveyor_twin.output.markers import CellMarkers
 from conveyor_twin.record import topics as contract
+from conveyor_twin.viz.foxglove_loops import cell_scene, ros_channel, ViewLoops
 from conveyor_twin.viz.foxglove_messages import density_grid
 from conveyor_twin.viz.foxglove_view import (DEFAULT_BACKLOG, DEFAULT_HOST, DEFAULT_PORT,
                                              DEFAULT_SCENE_RATE, DEFAULT_STREAM_RATE,
                                              DENSITY_GRID_TOPIC, EVERY_MESSAGE, INNER_HOST,
-                                             PUBLISH_PERIOD, SCENE_TOPIC, FoxgloveError,
-                                             check_host, density_zones, serve)
-from conveyor_twin.wire import cdr, schemas
+                                             SCENE_TOPIC, FoxgloveError, check_host,
+                                             density_zones, serve)
+from conveyor_twin.wire import cdr
 
 #: The streams of each cell the plant view serves (relative names).
 PLANT_STREAMS = ('parts', 'density', 'light_barriers', 'light_barrier_edges', 'belt_states',
@@ -79,7 +75,7 @@ class _CellScene:
         self.density: Dict[str, Tuple[int, bytes]] = {}
 
 
-class PlantView:
+class PlantView(ViewLoops):
     """The Foxglove server of a plant.
 
     :param plant: the validated plant.
@@ -92,11 +88,9 @@ class PlantView:
     def __init__(self, plant, *, stream_rate: float = DEFAULT_STREAM_RATE,
                  scene_rate: float = DEFAULT_SCENE_RATE, backlog: int = DEFAULT_BACKLOG,
                  health: Optional[Health] = None) -> None:
+        super().__init__(scene_rate=scene_rate, backlog=backlog, health=health)
         self.plant = plant
-        self.health = health if health is not None else Health()
         self.frame = plant_frame(plant)
-        self.scene_period = 1.0 / scene_rate
-        self.backlog = backlog
         every = max(1, int(round(1.0 / (stream_rate * plant.step))))
         self.cells = [_CellScene(c) for c in plant.cells]
         #: absolute topic -> (cell scene, relative stream name, thinning)
@@ -106,18 +100,6 @@ class PlantView:
                 self.streams[contract.resolve(name, scene.namespace)] = (
                     scene, name, 1 if name in EVERY_MESSAGE else every)
         self._count = {topic: 0 for topic in self.streams}
-        self._queue: Deque[Tuple[str, int, bytes]] = deque()
-        self.active = False
-        #: Called with True at the first client subscription and False after the last.
-        self.on_active: Callable[[bool], None] = lambda active: None
-        self.dropped = self.sent = self.scenes = 0
-        self._subscriptions: Dict[Tuple[int, int], str] = {}
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._threads: List[threading.Thread] = []
-        self.server = None
-        self.proxy = None
-        self.port = 0
         self.channels: Dict[str, object] = {}
 
     # -- the ROS side ----------------------------------------------------------------------
@@ -135,10 +117,7 @@ class PlantView:
             scene.density[cdr.decode_density_grid(data).zone] = (stamp_ns, data)
         elif rel in ('parts', 'light_barriers', 'actuator_states'):
             scene.latest[rel] = (stamp_ns, data)
-        if len(self._queue) >= self.backlog:
-            self._queue.popleft()
-            self.dropped += 1
-        self._queue.append((topic, stamp_ns, data))
+        self._enqueue(topic, stamp_ns, data)
 
     # -- server ----------------------------------------------------------------------------
     def start(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> int:
@@ -157,11 +136,11 @@ class PlantView:
         context = self._context = foxglove.Context()
         types = {t.name: t.type_name for t in streams_contract.STREAMS}
         for topic, (_, rel, _) in self.streams.items():
-            self.channels[topic] = _ros_channel(foxglove, context, topic, types[rel])
+            self.channels[topic] = ros_channel(foxglove, context, topic, types[rel])
         self._grids: Dict[Tuple[str, str], object] = {}
         for scene in self.cells:
             topic = contract.resolve(SCENE_TOPIC, scene.namespace)
-            self.channels[topic] = _ros_channel(foxglove, context, topic,
+            self.channels[topic] = ros_channel(foxglove, context, topic,
                                                 'visualization_msgs/msg/MarkerArray')
             for zone in density_zones(scene.cell):
                 self._grids[scene.name, zone] = GridChannel(
@@ -174,66 +153,18 @@ class PlantView:
             supported_encodings=['cdr'], context=context,
             message_backlog_size=self.backlog), host, port, self.health)
         self.port = self.proxy.port
-        for target, name in ((self._publish_loop, PUBLISHER_FAILURE),
-                             (self._scene_loop, SCENE_FAILURE)):
-            thread = self.health.thread(name, target)
-            thread.start()
-            self._threads.append(thread)
+        self._start_threads(PUBLISHER_FAILURE, SCENE_FAILURE)
         return self.port
-
-    def stop(self) -> None:
-        """Stop the threads and the server."""
-        self._stop.set()
-        for thread in self._threads:
-            thread.join(2.0)
-        if self.proxy is not None:
-            self.proxy.stop()
-            self.proxy = None
-        if self.server is not None:
-            self.server.stop()
-            self.server = None
-
-    # -- threads ---------------------------------------------------------------------------
-    def _publish_loop(self) -> None:
-        queue = self._queue
-        while not self._stop.wait(PUBLISH_PERIOD):
-            while queue:
-                topic, stamp_ns, data = queue.popleft()
-                self.channels[topic].log(data, log_time=stamp_ns)
-                self.sent += 1
-
-    def _scene_loop(self) -> None:
-        next_time = time.monotonic()
-        while not self._stop.is_set():
-            next_time += self.scene_period
-            delay = next_time - time.monotonic()
-            if delay < 0.0:
-                next_time = time.monotonic()
-            elif self._stop.wait(delay):
-                break
-            if self.active:
-                self.build_scene()
 
     def build_scene(self) -> None:
         """Log the frames, scenes and density grids of every cell's latest state."""
         stamps = []
         for scene in self.cells:
-            parts = scene.latest.get('parts')
-            if parts is None:
+            drawn = cell_scene(scene.markers, scene.cell, scene.latest)
+            if drawn is None:
                 continue
-            stamp_ns, data = parts
+            stamp_ns, markers = drawn
             stamps.append(stamp_ns)
-            p = cdr.decode_part_states(data)
-            blocked = np.zeros(len(scene.cell.light_barriers), bool)
-            barriers = scene.latest.get('light_barriers')
-            if barriers is not None:
-                blocked = cdr.decode_light_barrier_states(barriers[1])[4]
-            position = np.array([a.initial_position for a in scene.cell.actuators])
-            actuators = scene.latest.get('actuator_states')
-            if actuators is not None:
-                from conveyor_twin.record.decode import decode_actuator_states
-                position = decode_actuator_states(actuators[1]).actual
-            markers = scene.markers.build(stamp_ns, p.part_type, p.x, p.y, blocked, position)
             self.channels[contract.resolve(SCENE_TOPIC, scene.namespace)].log(
                 markers, log_time=stamp_ns)
             for zone, (t_ns, grid_bytes) in list(scene.density.items()):
@@ -260,31 +191,10 @@ class PlantView:
                                                    w=math.cos(0.5 * s.placement.yaw)))
             for s in self.cells])
 
-    # -- clients ---------------------------------------------------------------------------
-    def _subscribed(self, key: Tuple[int, int], topic: str, on: bool) -> None:
-        with self._lock:
-            if on:
-                self._subscriptions[key] = topic
-            else:
-                self._subscriptions.pop(key, None)
-            active = bool(self._subscriptions)
-            changed = active != self.active
-            if active and changed:
-                self._queue.clear()
-            self.active = active
-            if changed:
-                self.on_active(active)
-
     def counters(self) -> Dict[str, float]:
         """Return the view's counters: subscriptions, sent, dropped, scenes."""
         return {'subscriptions': len(self._subscriptions), 'sent': self.sent,
                 'dropped': self.dropped, 'scenes': self.scenes}
-
-
-def _ros_channel(foxglove, context, topic: str, type_name: str):
-    schema = foxglove.Schema(name=type_name, encoding='ros2msg',
-                             data=schemas.full_text(type_name).encode())
-    return foxglove.Channel(topic, schema=schema, message_encoding='cdr', context=context)
 
 
 class _Listener:

@@ -30,14 +30,9 @@ exception in the view's threads, or in its callbacks from the SDK, is reported t
 No rclpy here: the ROS side (:mod:`conveyor_twin.ros.foxglove_bridge`) supplies the hooks.
 """
 
-from collections import deque
 from dataclasses import dataclass
 import socket
-import threading
-import time
-from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
-
-import numpy as np
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from conveyor_twin import contract as streams_contract
 from conveyor_twin.cell.model import Cell
@@ -45,8 +40,9 @@ from conveyor_twin.health import Health
 from conveyor_twin.output.frame import Frame
 from conveyor_twin.output.markers import CellMarkers
 from conveyor_twin.record import topics as contract
+from conveyor_twin.viz.foxglove_loops import cell_scene, ros_channel, ViewLoops
 from conveyor_twin.viz.foxglove_messages import CommandParseError, decode_command, density_grid
-from conveyor_twin.wire import cdr, schemas
+from conveyor_twin.wire import cdr
 
 DEFAULT_HOST = '127.0.0.1'
 DEFAULT_PORT = 8765
@@ -56,11 +52,6 @@ DEFAULT_STREAM_RATE = 50.0
 DEFAULT_SCENE_RATE = 30.0
 #: Messages queued between the step and the publisher thread, and per client in the SDK [1].
 DEFAULT_BACKLOG = 1024
-#: Publisher thread period [s].
-PUBLISH_PERIOD = 0.01
-# While no client watches, the view's threads sleep until one subscribes (or the view stops);
-# they look again after this long at most [s], so they never poll the interpreter lock.
-IDLE_WAIT = 1.0
 #: Where the SDK's server listens, behind the subprotocol proxy (any free port).
 INNER_HOST = '127.0.0.1'
 SCENE_TOPIC = 'scene'
@@ -151,7 +142,7 @@ def served_topics(cell: Cell, namespace: str = '') -> List[str]:
     return topics
 
 
-class FoxgloveView:
+class FoxgloveView(ViewLoops):
     """The Foxglove server of one twin.
 
     :param cell: the running cell (the scene's geometry).
@@ -175,14 +166,12 @@ class FoxgloveView:
                  scene_rate: float = DEFAULT_SCENE_RATE,
                  backlog: int = DEFAULT_BACKLOG,
                  health: Optional[Health] = None) -> None:
+        super().__init__(scene_rate=scene_rate, backlog=backlog, health=health)
         self.cell = cell
-        self.health = health if health is not None else Health()
         self.namespace = namespace
         self.streams = dict(streams)
         self.on_command = on_command
         self.services = services
-        self.scene_period = 1.0 / scene_rate
-        self.backlog = backlog
         every = max(1, int(round(1.0 / (stream_rate * step_s))))
         #: Frames forwarded whole: one in ``every`` [1].
         self.every = every
@@ -192,33 +181,16 @@ class FoxgloveView:
         self._every = {topic: 1 if contract.relative(topic, namespace) in EVERY_MESSAGE
                        else every for topic in self.streams}
         self._count = {topic: 0 for topic in self.streams}
-        self._queue: Deque[Tuple[str, int, bytes]] = deque()
         self._latest: Dict[str, Tuple[int, bytes]] = {}
         self._density: Dict[str, Tuple[int, bytes]] = {}
         self._rel = {topic: contract.relative(topic, namespace) for topic in self.streams}
-        self.active = False          # a client is subscribed to something
-        #: Called with True when the first client subscription arrives and with False when
-        #: the last one goes (the ROS side starts and stops feeding the view).
-        self.on_active: Callable[[bool], None] = lambda active: None
-        self.dropped = 0             # messages dropped from the full queue
         self.rejected = 0            # client messages refused (invalid command, bad payload)
         self.last_rejection = ''
         #: Called with the reason of a client message that is no command at all (undecodable,
         #: another topic); rejected commands are reported by ``on_command`` itself.
         self.on_invalid: Callable[[str], None] = lambda reason: None
-        self.sent = 0                # messages handed to the SDK
-        self.scenes = 0              # scenes built
-        self._subscriptions: Dict[Tuple[int, int], str] = {}
         self._client_channels: Dict[Tuple[int, int], Tuple[str, str]] = {}
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._watched = threading.Event()  # set while a client is subscribed, or to stop
-        self._threads: List[threading.Thread] = []
         self._markers = CellMarkers(cell)
-        self.server = None
-        self.proxy = None
-        self.port = 0
-        self.channels: Dict[str, object] = {}
 
     # -- the step side ---------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
@@ -277,13 +249,6 @@ class FoxgloveView:
         elif rel in SCENE_STREAMS:
             self._latest[rel] = (stamp_ns, data)
 
-    def _enqueue(self, topic: str, stamp_ns: int, data: bytes) -> None:
-        """Queue a message for the publisher thread; drop the oldest when the queue is full."""
-        if len(self._queue) >= self.backlog:
-            self._queue.popleft()
-            self.dropped += 1
-        self._queue.append((topic, stamp_ns, data))
-
     # -- server --------------------------------------------------------------------------
     def start(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> int:
         """Start the server and its threads; return the port it listens on.
@@ -299,9 +264,9 @@ class FoxgloveView:
                                 'pip install foxglove-sdk') from None
         context = self._context = foxglove.Context()  # the channels live as long as it
         for topic, type_name in self.streams.items():
-            self.channels[topic] = self._channel(foxglove, context, topic, type_name)
+            self.channels[topic] = ros_channel(foxglove, context, topic, type_name)
         scene = contract.resolve(SCENE_TOPIC, self.namespace)
-        self.channels[scene] = self._channel(foxglove, context, scene,
+        self.channels[scene] = ros_channel(foxglove, context, scene,
                                              'visualization_msgs/msg/MarkerArray')
         from foxglove.channels import GridChannel
         self._grid_channels = {
@@ -315,18 +280,8 @@ class FoxgloveView:
             services=[self._service(foxglove, s) for s in self.services],
             context=context, message_backlog_size=self.backlog), host, port, self.health)
         self.port = self.proxy.port
-        for target, name in ((self._publish_loop, PUBLISHER_FAILURE),
-                             (self._scene_loop, SCENE_FAILURE)):
-            thread = self.health.thread(name, target)
-            thread.start()
-            self._threads.append(thread)
+        self._start_threads(PUBLISHER_FAILURE, SCENE_FAILURE)
         return self.port
-
-    @staticmethod
-    def _channel(foxglove, context, topic: str, type_name: str):
-        schema = foxglove.Schema(name=type_name, encoding='ros2msg',
-                                 data=schemas.full_text(type_name).encode())
-        return foxglove.Channel(topic, schema=schema, message_encoding='cdr', context=context)
 
     def _service(self, foxglove, spec: ServiceSpec):
         from foxglove import MessageSchema, Service, ServiceSchema
@@ -342,67 +297,13 @@ class FoxgloveView:
             spec.type_name, request=message_schema('Request', spec.request_text),
             response=message_schema('Response', spec.response_text)), handler=handler)
 
-    def stop(self) -> None:
-        """Stop the threads and the server (clients are disconnected)."""
-        self._stop.set()
-        self._watched.set()
-        for thread in self._threads:
-            thread.join(2.0)
-        if self.proxy is not None:
-            self.proxy.stop()
-            self.proxy = None
-        if self.server is not None:
-            self.server.stop()
-            self.server = None
-
-    # -- threads -------------------------------------------------------------------------
-    def _publish_loop(self) -> None:
-        queue = self._queue
-        while not self._stop.is_set():
-            if not self.active and not queue:
-                self._watched.wait(IDLE_WAIT)
-                continue
-            if self._stop.wait(PUBLISH_PERIOD):
-                break
-            while queue:
-                topic, stamp_ns, data = queue.popleft()
-                self.channels[topic].log(data, log_time=stamp_ns)
-                self.sent += 1
-
-    def _scene_loop(self) -> None:
-        next_time = time.monotonic()
-        while not self._stop.is_set():
-            if not self.active:
-                self._watched.wait(IDLE_WAIT)
-                next_time = time.monotonic()
-                continue
-            next_time += self.scene_period
-            delay = next_time - time.monotonic()
-            if delay < 0.0:
-                next_time = time.monotonic()
-            elif self._stop.wait(delay):
-                break
-            if self.active:
-                self.build_scene()
-
     def build_scene(self) -> None:
         """Log the scene and density grids of the latest state (scene thread)."""
-        parts = self._latest.get('parts')
-        if parts is None:
+        scene = cell_scene(self._markers, self.cell, self._latest)
+        if scene is None:
             return
-        stamp_ns, data = parts
-        p = cdr.decode_part_states(data)
-        blocked = np.zeros(len(self.cell.light_barriers), bool)
-        barriers = self._latest.get('light_barriers')
-        if barriers is not None:
-            blocked = cdr.decode_light_barrier_states(barriers[1])[4]
-        position = np.array([a.initial_position for a in self.cell.actuators])
-        actuators = self._latest.get('actuator_states')
-        if actuators is not None:
-            from conveyor_twin.record.decode import decode_actuator_states
-            position = decode_actuator_states(actuators[1]).actual
-        scene = self._markers.build(stamp_ns, p.part_type, p.x, p.y, blocked, position)
-        self.channels[contract.resolve(SCENE_TOPIC, self.namespace)].log(scene,
+        stamp_ns, markers = scene
+        self.channels[contract.resolve(SCENE_TOPIC, self.namespace)].log(markers,
                                                                         log_time=stamp_ns)
         for zone, (t_ns, grid_bytes) in list(self._density.items()):
             channel = self._grid_channels.get(zone)
@@ -412,24 +313,8 @@ class FoxgloveView:
         self.scenes += 1
 
     # -- client input ----------------------------------------------------------------------
-    def _subscribed(self, key: Tuple[int, int], topic: str, on: bool) -> None:
-        with self._lock:
-            if on:
-                self._subscriptions[key] = topic
-            else:
-                self._subscriptions.pop(key, None)
-            active = bool(self._subscriptions)
-            changed = active != self.active
-            if active and changed:
-                self._queue.clear()
-                self._frames = 0
-            self.active = active
-            if active:
-                self._watched.set()
-            elif not self._stop.is_set():
-                self._watched.clear()
-            if changed:  # under the lock: the ROS side sees the changes in order
-                self.on_active(active)
+    def _on_first_subscription(self) -> None:
+        self._frames = 0
 
     def _advertised(self, key: Tuple[int, int], topic: str, encoding: str) -> None:
         self._client_channels[key] = (contract.relative(topic, self.namespace), encoding)
