@@ -11,6 +11,7 @@ from conveyor_twin.cell import load_cell
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.record.decode import decode_belt_states
 from conveyor_twin.wire import cdr
+from test.viz.foxglove_wire import Deadline
 
 pytestmark = pytest.mark.ros
 websockets_client = pytest.importorskip('websockets.sync.client')
@@ -28,23 +29,9 @@ def twin(ros_context):
     composed.stop()
 
 
-class _Deadline:
-    """A time budget for a receive loop: every loop of these tests ends, whatever the server
-    does."""
-
-    def __init__(self, seconds: float = TIMEOUT) -> None:
-        self.end = time.monotonic() + seconds
-
-    def left(self) -> float:
-        left = self.end - time.monotonic()
-        if left <= 0.0:
-            raise AssertionError('the Foxglove server did not answer in time')
-        return left
-
-
 def _advertised(ws, services: dict = None) -> dict:
     channels: dict = {}
-    deadline = _Deadline()
+    deadline = Deadline()
     while '/parts' not in channels or (services is not None and not services):
         message = json.loads(ws.recv(timeout=deadline.left()))
         if message['op'] == 'advertise':
@@ -54,7 +41,7 @@ def _advertised(ws, services: dict = None) -> dict:
     return channels
 
 
-def _messages(ws, deadline: _Deadline):
+def _messages(ws, deadline: Deadline):
     """Yield (subscription id, log time [ns], payload) of the binary message data received."""
     while True:
         message = ws.recv(timeout=deadline.left())
@@ -142,7 +129,7 @@ def test_view_is_fed_only_while_a_client_watches(twin):
                                        subprotocols=[SUBPROTOCOL]) as ws:
             channels = _advertised(ws)
             _subscribe(ws, channels, ['/clock'])
-            deadline = _Deadline()
+            deadline = Deadline()
             next(_messages(ws, deadline))
             assert view in twin.output.sinks
         while view in twin.output.sinks:  # the server sees the client go
@@ -172,7 +159,7 @@ def test_spawn_parts_is_a_foxglove_service(twin):
             ws.send(b'\x02' + struct.pack('<III', services['/spawn_parts']['id'], 42,
                                           len(encoding)) + encoding
                     + serialize_message(request))
-            deadline = _Deadline()
+            deadline = Deadline()
             while True:
                 message = ws.recv(timeout=deadline.left())
                 if isinstance(message, bytes) and message[0] == 3:
@@ -201,12 +188,12 @@ def test_slow_client_never_stalls_the_twin(ros_context):
                                        subprotocols=[SUBPROTOCOL], max_size=None) as ws:
             channels = _advertised(ws)
             _subscribe(ws, channels, sorted(channels))
-            deadline = _Deadline()
+            deadline = Deadline()
             while view not in composed.output.sinks:
                 time.sleep(0.01)
                 deadline.left()
             composed.start()  # and read nothing more
-            deadline = _Deadline(120.0)
+            deadline = Deadline(120.0)
             while composed.twin.step_index < steps:
                 time.sleep(0.05)
                 deadline.left()
@@ -228,7 +215,7 @@ def test_both_names_of_the_protocol_are_accepted(twin, subprotocol):
             assert ws.subprotocol == subprotocol
             channels = _advertised(ws)
             _subscribe(ws, channels, ['/clock'])
-            deadline = _Deadline()
+            deadline = Deadline()
             stamps = [log_time for _, (_, log_time, _) in zip(range(3),
                                                              _messages(ws, deadline))]
         assert stamps == sorted(stamps) and len(set(stamps)) == 3
@@ -256,7 +243,7 @@ def test_another_subprotocol_is_refused_plainly_and_the_twin_goes_on(twin):
         assert 'offered foxglove.websocket.v2' in text
         assert view.counters()['refused_clients'] == 1
         before = twin.twin.step_index
-        deadline = _Deadline()
+        deadline = Deadline()
         while twin.twin.step_index <= before:
             time.sleep(0.01)
             deadline.left()
@@ -274,7 +261,7 @@ def test_lockstep_twin_serves_a_view_of_the_test():
                                        subprotocols=[SUBPROTOCOL]) as ws:
             channels = _advertised(ws)
             _subscribe(ws, channels, ['/clock'])
-            deadline = _Deadline()
+            deadline = Deadline()
             while view not in test_twin.composed.output.sinks:
                 time.sleep(0.01)
                 deadline.left()
@@ -295,7 +282,7 @@ def test_split_coordinator_serves_the_view_from_its_node_parameter():
         probe.bind(('127.0.0.1', 0))
         port = probe.getsockname()[1]
     with LockstepTwin(layout='split', foxglove=f'127.0.0.1:{port}') as test_twin:
-        deadline = _Deadline(60.0)
+        deadline = Deadline(60.0)
         while True:  # the coordinator process opens the server after it started
             try:
                 ws = websockets_client.connect(f'ws://127.0.0.1:{port}',
@@ -308,11 +295,11 @@ def test_split_coordinator_serves_the_view_from_its_node_parameter():
             channels = _advertised(ws)
             ids = _subscribe(ws, channels, ['/parts', '/belt_states'])
             seen = {'/parts': [], '/belt_states': []}
-            deadline = _Deadline(60.0)
+            deadline = Deadline(60.0)
             while len(seen['/parts']) < 3 or len(seen['/belt_states']) < 3:
                 test_twin.step(100)  # the scale streams flow once the new subscriptions match
                 try:
-                    for sub, log_time, payload in _messages(ws, _Deadline(0.5)):
+                    for sub, log_time, payload in _messages(ws, Deadline(0.5)):
                         seen[ids[sub]].append(log_time)
                 except (AssertionError, TimeoutError):
                     pass
