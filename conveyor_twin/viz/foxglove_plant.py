@@ -29,8 +29,8 @@ from conveyor_twin.viz.foxglove_messages import density_grid
 from conveyor_twin.viz.foxglove_view import (DEFAULT_BACKLOG, DEFAULT_HOST, DEFAULT_PORT,
                                              DEFAULT_SCENE_RATE, DEFAULT_STREAM_RATE,
                                              DENSITY_GRID_TOPIC, EVERY_MESSAGE, INNER_HOST,
-                                             SCENE_TOPIC, FoxgloveError, check_host,
-                                             density_zones, serve)
+                                             SCENE_TOPIC, density_zones,
+                                             import_sdk, serve)
 from conveyor_twin.wire import cdr
 
 #: The streams of each cell the plant view serves (relative names).
@@ -125,14 +125,9 @@ class PlantView(ViewLoops):
 
         :raises FoxgloveError: if the host is unknown, the port is taken or the SDK is missing.
         """
-        check_host(host)
-        try:
-            import foxglove
-            from foxglove.channels import FrameTransformsChannel, GridChannel
-            from foxglove.websocket import Capability
-        except ImportError as exc:
-            raise FoxgloveError(f'--foxglove needs the foxglove-sdk package ({exc}); '
-                                'pip install foxglove-sdk') from None
+        foxglove = import_sdk(host)
+        from foxglove.channels import FrameTransformsChannel, GridChannel
+        from foxglove.websocket import Capability
         context = self._context = foxglove.Context()
         types = {t.name: t.type_name for t in streams_contract.STREAMS}
         for topic, (_, rel, _) in self.streams.items():

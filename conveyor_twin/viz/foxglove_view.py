@@ -108,6 +108,20 @@ def check_host(host: str) -> None:
         raise FoxgloveError(f'--foxglove: unknown host {host!r} ({exc})') from None
 
 
+def import_sdk(host: str) -> Any:
+    """Check ``host`` (:func:`check_host`) and return the ``foxglove`` SDK module.
+
+    :raises FoxgloveError: if the host is unknown or the SDK is not installed.
+    """
+    check_host(host)
+    try:
+        import foxglove
+    except ImportError as exc:
+        raise FoxgloveError(f'--foxglove needs the foxglove-sdk package ({exc}); '
+                            'pip install foxglove-sdk') from None
+    return foxglove
+
+
 def serve(start: Callable[[], Any], host: str, port: int, health: Health) -> Tuple[Any, Any]:
     """Start an SDK server on a free loopback port (``start()``) behind a
     :class:`~conveyor_twin.viz.foxglove_proxy.SubprotocolProxy` at ``host:port``; return both.
@@ -255,13 +269,8 @@ class FoxgloveView(ViewLoops):
 
         :raises FoxgloveError: if the host is unknown, the port is taken or the SDK is missing.
         """
-        check_host(host)
-        try:
-            import foxglove
-            from foxglove.websocket import Capability
-        except ImportError as exc:
-            raise FoxgloveError(f'--foxglove needs the foxglove-sdk package ({exc}); '
-                                'pip install foxglove-sdk') from None
+        foxglove = import_sdk(host)
+        from foxglove.websocket import Capability
         context = self._context = foxglove.Context()  # the channels live as long as it
         for topic, type_name in self.streams.items():
             self.channels[topic] = ros_channel(foxglove, context, topic, type_name)
