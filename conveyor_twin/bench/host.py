@@ -4,7 +4,8 @@ The floor is a loop paced exactly like the twin's stepping thread but doing no w
 program (``paced_floor.c``, built on first use with the system C compiler into ``build/`` of the
 source tree, or the user's cache directory) that sleeps to absolute 1 ms deadlines with
 ``clock_nanosleep(TIMER_ABSTIME)``, wakes 150 us early and spins to the deadline, runs late steps
-back to back, under SCHED_FIFO where permitted. Every overrun it sees is time the kernel or (on a
+back to back, under SCHED_FIFO and holding a request for zero CPU wake-up latency where
+permitted (as the twin's pacer does). Every overrun it sees is time the kernel or (on a
 virtual machine) the hypervisor did not give it, which no 1 kHz loop on the machine can avoid:
 ``bench twin`` reports the twin's overruns as a ratio to this floor, measured in windows
 interleaved with the twin's.
@@ -142,7 +143,8 @@ def _main_paced(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result))
         return 0
-    print(f"paced 1 kHz floor loop ({windows[0]['policy']}), {args.windows} windows of "
+    print(f"paced 1 kHz floor loop ({windows[0]['policy']}, CPU wake-up latency request "
+          f"{windows[0].get('latency_request')}), {args.windows} windows of "
           f"{args.duration / args.windows:g} s; load {result['load_average']:.2f}")
     for w in windows:
         print(f"  overruns {w['overruns']:>5} of {w['steps']} steps, max lateness "

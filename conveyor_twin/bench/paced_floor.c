@@ -4,21 +4,25 @@
  * Absolute deadlines t0 + k * period on CLOCK_MONOTONIC; before each deadline the loop sleeps
  * with clock_nanosleep(TIMER_ABSTIME) to SPIN_NS before it, then spins to the deadline; a step
  * that ends after its deadline is an overrun and the late steps run back to back (no skipping),
- * as the twin's pacer does. Under SCHED_FIFO when permitted. Whatever overruns this loop sees,
- * no 1 kHz loop on the machine can avoid: it is the host's floor.
+ * as the twin's pacer does. Under SCHED_FIFO when permitted, and, like the twin's pacer, holding
+ * a request for zero CPU wake-up latency (/dev/cpu_dma_latency) when permitted, unless the
+ * environment sets CONVEYOR_TWIN_CPU_LATENCY_REQUEST=0. Whatever overruns this loop sees, no
+ * 1 kHz loop on the machine can avoid: it is the host's floor.
  *
  * usage: paced_floor SECONDS [PERIOD_NS] [FIFO_PRIORITY]
  * prints one JSON object: steps, overruns, max lateness [ns], wake-ups later than the spin
- * margin, the scheduling policy obtained.
+ * margin, the scheduling policy and the latency request obtained.
  */
 #define _GNU_SOURCE
 #include <errno.h>
+#include <fcntl.h>
 #include <sched.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #define SLEEP_MIN_NS 200000LL /* sleep only when the deadline is further than this [ns] */
 #define SPIN_NS 150000LL      /* wake this long before the deadline, then spin [ns] */
@@ -56,6 +60,13 @@ int main(int argc, char **argv)
         policy = sched_setscheduler(0, SCHED_FIFO, &param) == 0 ? "SCHED_FIFO" :
                  "normal (SCHED_FIFO refused)";
     }
+    const char *latency = "off";
+    const char *setting = getenv("CONVEYOR_TWIN_CPU_LATENCY_REQUEST");
+    if (!setting || strcmp(setting, "0") != 0) {
+        int fd = open("/dev/cpu_dma_latency", O_WRONLY); /* held until the process ends */
+        int32_t zero = 0;
+        latency = fd >= 0 && write(fd, &zero, sizeof zero) == sizeof zero ? "held" : "refused";
+    }
     int64_t steps = (int64_t)(seconds * 1e9 / (double)period);
     int64_t overruns = 0, late_wakes = 0, max_lateness = 0;
     int64_t start = now_ns();
@@ -77,8 +88,9 @@ int main(int argc, char **argv)
         }
     }
     printf("{\"steps\": %lld, \"overruns\": %lld, \"max_lateness_ns\": %lld, "
-           "\"late_wakes\": %lld, \"period_ns\": %lld, \"policy\": \"%s\"}\n",
+           "\"late_wakes\": %lld, \"period_ns\": %lld, \"policy\": \"%s\", "
+           "\"latency_request\": \"%s\"}\n",
            (long long)steps, (long long)overruns, (long long)max_lateness,
-           (long long)late_wakes, (long long)period, policy);
+           (long long)late_wakes, (long long)period, policy, latency);
     return 0;
 }

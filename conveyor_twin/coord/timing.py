@@ -6,6 +6,13 @@ from typing import Dict
 
 import numpy as np
 
+from conveyor_twin.coord.latency import sleep_holding_gil, WakeLatencyRequest
+
+#: The pacer sleeps releasing the interpreter lock until this long before a deadline, then
+#: sleeps the rest holding it [ns]: getting the lock back may take another thread's switch
+#: interval (0.2 ms in realtime), and at the deadline the step must find it in hand.
+APPROACH_NS = 300_000
+
 
 class TimeMode(str, Enum):
     """How simulation time advances."""
@@ -21,6 +28,13 @@ class DeadlinePacer:
     A step whose work ends after its deadline is an overrun; the pacer never skips steps to
     catch up (it runs late steps back to back), so overruns are counted, never hidden.
 
+    Between steps the pacer sleeps with the interpreter lock released (other threads publish,
+    record, serve) until :data:`APPROACH_NS` before the deadline, then sleeps the rest holding
+    the lock, so the step starts at its deadline with the lock in hand. A realtime loop holds
+    :attr:`latency_request` (zero CPU wake-up latency,
+    :class:`~conveyor_twin.coord.latency.WakeLatencyRequest`) while it paces, until
+    :meth:`close`.
+
     :param period_ns: step period [ns].
     """
 
@@ -30,11 +44,16 @@ class DeadlinePacer:
         self.index = 0
         self.overruns = 0
         self.max_lateness_ns = 0
+        self.latency_request = WakeLatencyRequest()
 
     def restart(self) -> None:
         """Start a new series of deadlines from now."""
         self.start_ns = time.monotonic_ns()
         self.index = 0
+
+    def close(self) -> None:
+        """Withdraw the wake-up latency request (pacing again needs :meth:`restart`)."""
+        self.latency_request.release()
 
     def wait_next(self) -> None:
         """Count an overrun if the current step ended late, then sleep to the next deadline."""
@@ -45,11 +64,9 @@ class DeadlinePacer:
             self.overruns += 1
             self.max_lateness_ns = max(self.max_lateness_ns, now - deadline)
             return
-        remaining = deadline - now
-        if remaining > 200_000:
-            time.sleep((remaining - 150_000) * 1e-9)
-        while time.monotonic_ns() < deadline:
-            pass
+        if deadline - now > APPROACH_NS + 50_000:
+            time.sleep((deadline - now - APPROACH_NS) * 1e-9)
+        sleep_holding_gil(deadline)
 
 
 _HIST_BIN_S = 1e-6   # whole-run histogram: 1 us bins up to 100 ms (longer steps: last bin)
