@@ -12,7 +12,7 @@ its type names, and a new sink (a viewer, a test harness) reads it to know what 
 
 from dataclasses import dataclass
 import enum
-from typing import Dict, Tuple
+from typing import Dict, Optional, Tuple
 
 #: Steps between two ``diagnostics`` messages (1 Hz of simulation time at a 1 ms step).
 DIAGNOSTICS_PERIOD_STEPS = 1000
@@ -181,6 +181,64 @@ CONTRACT: Dict[str, Topic] = {t.name: t for t in STREAMS + COMMANDS + REPLIES + 
 def produced_by(producer: Producer) -> Tuple[Topic, ...]:
     """Return the streams a stage produces (what its process's frames carry)."""
     return tuple(t for t in STREAMS if t.producer is producer)
+
+
+class Shape(str, enum.Enum):
+    """What one step's frame holds of a stream.
+
+    ``ONE``: the bytes of one message, or None when the step emits none; ``MANY``: a sequence
+    of messages (one per macro zone) stamped with the step; ``STAMPED``: a sequence of
+    (stamp [ns], bytes), each message with its own time (light-barrier edges).
+    """
+
+    ONE = 'one'
+    MANY = 'many'
+    STAMPED = 'stamped'
+
+
+@dataclass(frozen=True)
+class FrameSlot:
+    """Where the frame of a step (:class:`conveyor_twin.output.frame.Frame`) carries a stream.
+
+    :param topic: the contract stream.
+    :param attribute: the frame's attribute holding its bytes.
+    :param shape: one message or a sequence (:class:`Shape`).
+    :param outage: a ``stream_outage`` fault may silence it.
+    """
+
+    topic: Topic
+    attribute: str
+    shape: Shape = Shape.ONE
+    outage: bool = True
+
+    @property
+    def empty(self) -> Optional[tuple]:
+        """The attribute's value when the step emits nothing of the stream (None or ())."""
+        return None if self.shape is Shape.ONE else ()
+
+
+#: Every stream a step emits, with its place in the frame, in the order every sink hands them
+#: on (and a recording holds them within a step). The one-message streams come first, then
+#: the sequences (sinks loop over each shape apart). A new per-step stream is an entry here,
+#: its ``Topic`` above and its producer's encoder.
+FRAME: Tuple[FrameSlot, ...] = (
+    FrameSlot(CLOCK, 'clock'), FrameSlot(BELT_STATES, 'belt_states'),
+    FrameSlot(ACTUATOR_STATES, 'actuator_states'), FrameSlot(DIAGNOSTICS, 'diagnostics'),
+    FrameSlot(PARTS, 'parts'), FrameSlot(LIGHT_BARRIERS, 'light_barriers'),
+    FrameSlot(FAULTS, 'faults', outage=False),
+    FrameSlot(LIGHT_BARRIER_EDGES, 'edges', Shape.STAMPED),
+    FrameSlot(DENSITY, 'density', Shape.MANY))
+
+
+def frame_streams(producer: Producer) -> Tuple[Topic, ...]:
+    """Return the streams of the frame a stage produces (what its node publishes from its
+    frames), in frame order."""
+    return tuple(s.topic for s in FRAME if s.topic.producer is producer)
+
+
+#: The streams a ``stream_outage`` fault may silence, in the order of :data:`STREAMS`.
+OUTAGE_STREAMS: Tuple[Topic, ...] = tuple(
+    t for t in STREAMS if any(s.topic is t and s.outage for s in FRAME))
 
 
 # --- a plant of cells (docs/plant.md): names relative to the plant's namespace, ``{link}``

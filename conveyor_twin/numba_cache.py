@@ -2,7 +2,7 @@
 
 numba's ``cache=True`` keys a function's cached machine code on its own file only, so a kernel
 whose callees live in other modules (``macro.solver.advance`` inlines ``macro.fluxes`` and
-``macro.collision``; ``coord.handover`` calls ``micro.sources``) would keep running the old code
+``macro.collision``; ``coupling.handover`` calls ``micro.sources``) would keep running the old code
 after only the callees changed, e.g. after a ``git pull``. On import of ``conveyor_twin`` the
 sources of the kernel packages (sub-packages included) are hashed together; when the hash
 differs from the last import's, their cache files (sub-packages' too) are removed and the new
@@ -14,7 +14,7 @@ from pathlib import Path
 
 _ROOT = Path(__file__).resolve().parent
 # Packages with numba kernels (cache=True); one hash over all of them, as they call each other.
-KERNEL_PACKAGES = ('micro', 'macro', 'coord')
+KERNEL_PACKAGES = ('micro', 'macro', 'coupling')
 _STAMP = 'conveyor_twin_kernels.stamp'
 
 

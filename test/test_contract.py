@@ -5,8 +5,8 @@ import pathlib
 import pytest
 
 from conveyor_twin import contract
-from conveyor_twin.contract import Kind, Producer, Rate, Stamp
-from conveyor_twin.output.frame import FRAME_STREAMS
+from conveyor_twin.contract import Kind, Producer, Rate, Shape, Stamp
+from conveyor_twin.output.frame import Frame, FRAME_STREAMS
 from conveyor_twin.wire import schemas
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -86,6 +86,25 @@ def test_qos_rates_stamps_and_producers():
     assert contract.produced_by(Producer.MACRO) == (contract.DENSITY,)
     assert set(contract.produced_by(Producer.MICRO)) == {
         contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES, contract.MARKERS}
+
+
+def test_the_frame_table_places_every_stream_of_a_step_once():
+    slots = contract.FRAME
+    assert len({s.topic for s in slots}) == len({s.attribute for s in slots}) == len(slots)
+    assert FRAME_STREAMS == tuple(s.topic for s in slots)
+    assert all(s.topic.kind is Kind.STREAM and s.attribute in Frame.__slots__ for s in slots)
+    # one message or None per step, but a sequence for the edges and the zones' grids
+    assert {s.topic: s.empty for s in slots if s.shape is not Shape.ONE} == {
+        contract.LIGHT_BARRIER_EDGES: (), contract.DENSITY: ()}
+    # the one-message streams come first: sinks that group by shape keep the table's order
+    ones = [s.shape is Shape.ONE for s in slots]
+    assert ones == sorted(ones, reverse=True)
+    frame = Frame()
+    assert all(getattr(frame, s.attribute) == s.empty for s in slots)
+    assert list(frame.messages()) == []
+    # a stream outage silences any stream of the frame but the fault state itself
+    assert contract.OUTAGE_STREAMS == tuple(
+        t for t in contract.STREAMS if t not in (contract.MARKERS, contract.FAULTS))
 
 
 def test_plant_topics_lose_nothing_and_name_each_link():

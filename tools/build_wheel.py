@@ -46,7 +46,7 @@ from wheelbuild.metadata import DISTROS, ROOT, check_distro, read_pins  # noqa: 
 PYTHONS = ('3.11', '3.12')
 COMPAT = ROOT / 'tools' / 'wheelbuild' / 'glibcxx_compat.cpp'
 #: What goes into the pure wheel's source copy (setup.py's inputs).
-SOURCES = ('setup.py', 'setup.cfg', 'package.xml', 'resource', 'conveyor_twin')
+SOURCES = ('setup.py', 'setup.cfg', 'package.xml', 'resource', 'conveyor_twin', 'msg_defs')
 IGNORED = shutil.ignore_patterns('__pycache__', '*.pyc', '*.nbi', '*.nbc', '*.egg-info')
 #: Variables a venv's python sets for its children; no build step may inherit them.
 INHERITED = ('LD_LIBRARY_PATH', '_ROS_WHEELS_BOOTSTRAP_COMPLETE', 'AMENT_PREFIX_PATH',

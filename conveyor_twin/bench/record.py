@@ -31,6 +31,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from conveyor_twin import contract
+from conveyor_twin.record.topics import resolve
 from conveyor_twin.record.writer import McapRecorder
 from conveyor_twin.wire import cdr
 
@@ -47,15 +49,13 @@ COMPRESSIONS = ('none', 'lz4', 'zstd')
 #: Longest drain of the queue after the last paced step for a real-time pass [s].
 DRAIN_LIMIT = 0.1
 
-_TYPES = {
-    '/parts': 'conveyor_twin_msgs/msg/PartStates',
-    '/density': 'conveyor_twin_msgs/msg/DensityGrid',
-    '/light_barriers': 'conveyor_twin_msgs/msg/LightBarrierStates',
-    '/light_barrier_edges': 'conveyor_twin_msgs/msg/LightBarrierEdge',
-    '/belt_states': 'conveyor_twin_msgs/msg/BeltStates',
-    '/actuator_states': 'conveyor_twin_msgs/msg/ActuatorStates',
-    '/clock': 'rosgraph_msgs/msg/Clock',
-}
+_STREAMS = (contract.PARTS, contract.DENSITY, contract.LIGHT_BARRIERS,
+            contract.LIGHT_BARRIER_EDGES, contract.BELT_STATES, contract.ACTUATOR_STATES,
+            contract.CLOCK)
+#: Recorded names (no namespace) of the streams.
+_PARTS, _DENSITY, _BARRIERS, _EDGES, _BELTS, _ACTUATORS, _CLOCK = (resolve(t.name)
+                                                                   for t in _STREAMS)
+_TYPES = {resolve(t.name): t.type_name for t in _STREAMS}
 
 
 def message_pool(n_parts: int, seed: int = 0) -> List[List[Tuple[str, bytes]]]:
@@ -85,18 +85,17 @@ def message_pool(n_parts: int, seed: int = 0) -> List[List[Tuple[str, bytes]]]:
         density = np.tile((200.0 * np.exp(-(gx - 3.0 - 0.5e-3 * k) ** 2)).astype(np.float32),
                           (NY, 1))
         step = [
-            ('/clock', cdr.encode_clock(t)),
-            ('/parts', cdr.encode_part_states(t, 'cell', k, ids, types, x, y, yaw, vx, vy, wz)),
-            ('/belt_states', cdr.encode_belt_states(t, 'cell', BELTS, speeds, speeds)),
-            ('/actuator_states', cdr.encode_actuator_states(t, 'cell', ACTUATORS, [0.1],
-                                                            [0.1])),
-            ('/light_barriers', cdr.encode_light_barrier_states(
+            (_CLOCK, cdr.encode_clock(t)),
+            (_PARTS, cdr.encode_part_states(t, 'cell', k, ids, types, x, y, yaw, vx, vy, wz)),
+            (_BELTS, cdr.encode_belt_states(t, 'cell', BELTS, speeds, speeds)),
+            (_ACTUATORS, cdr.encode_actuator_states(t, 'cell', ACTUATORS, [0.1], [0.1])),
+            (_BARRIERS, cdr.encode_light_barrier_states(
                 t, 'cell', k, BARRIERS, np.array([k % 7 == 0, False, True, False]),
                 np.array([k, 0, 1, 0], dtype=np.uint32))),
-            ('/density', grid.encode(t, k, density, float(density.sum()) * 1e-4)),
+            (_DENSITY, grid.encode(t, k, density, float(density.sum()) * 1e-4)),
         ]
         if k % EDGE_EVERY == 0:
-            step.append(('/light_barrier_edges',
+            step.append((_EDGES,
                          cdr.encode_light_barrier_edge(t, 'cell', 'lb_in', True, 1)))
         pool.append(step)
     return pool
@@ -104,7 +103,7 @@ def message_pool(n_parts: int, seed: int = 0) -> List[List[Tuple[str, bytes]]]:
 
 def _recorder(path: str, compression: str, queue_size: int = 20000) -> McapRecorder:
     rec = McapRecorder(path, compression=compression, queue_size=queue_size,
-                       decimation={'/density': DENSITY_DECIMATION})
+                       decimation={_DENSITY: DENSITY_DECIMATION})
     for topic, type_name in _TYPES.items():
         rec.add_topic(topic, type_name)
     return rec

@@ -37,7 +37,9 @@ from typing import Dict, IO, List, Optional, Tuple
 
 import numpy as np
 
+from conveyor_twin import contract
 from conveyor_twin.bench.cpu import cpu_times, steal_percent
+from conveyor_twin.record.topics import resolve
 
 DEFAULT_DURATION = 3600.0   # s of wall time
 DEFAULT_SAMPLE_PERIOD = 10.0  # s between samples
@@ -49,7 +51,8 @@ DEFAULT_FLOOR_WINDOW = 30.0  # s of the paced floor loop before and after the ru
 DEFAULT_PAUSE = 0.02
 STEP_NS = 1_000_000
 #: Streams published once per step, checked step by step.
-PER_STEP = ('/clock', '/parts', '/belt_states', '/light_barriers', '/actuator_states')
+PER_STEP = tuple(resolve(t.name) for t in (contract.CLOCK, contract.PARTS, contract.BELT_STATES,
+                                          contract.LIGHT_BARRIERS, contract.ACTUATOR_STATES))
 # Domain ids clear of the ephemeral port range (ROS 2 "The ROS_DOMAIN_ID"), 0 left out; the
 # lock files are those of the test suite's domain claims, so both never share a domain.
 DOMAIN_IDS = tuple(range(1, 102)) + tuple(range(215, 233))
@@ -112,11 +115,11 @@ def check_recording(path: str, steps: Optional[int]) -> Dict[str, object]:
     :return: per-topic message counts and first/last step, and ``lost`` findings (empty: nothing
         lost).
     """
-    from conveyor_twin.record import _scan, reader
+    from conveyor_twin.record import reader, scan
     findings: List[str] = []
     if not reader.is_complete(path):
         findings.append('the recording has no valid footer')
-    report = _scan.ScanReport(path, 0)
+    report = scan.ScanReport(path, 0)
     prev_step: Dict[int, int] = {}
     first_step: Dict[int, int] = {}
     prev_seq: Dict[int, int] = {}
@@ -124,7 +127,7 @@ def check_recording(path: str, steps: Optional[int]) -> Dict[str, object]:
     step_gaps: Dict[int, int] = {}
     seq_gaps: Dict[int, int] = {}
     per_step_ids: Dict[int, bool] = {}
-    for m in _scan.iter_scan(path, report):
+    for m in scan.iter_scan(path, report):
         cid = m.channel_id
         per_step = per_step_ids.get(cid)
         if per_step is None:
@@ -160,7 +163,7 @@ def check_recording(path: str, steps: Optional[int]) -> Dict[str, object]:
     for name in PER_STEP:
         if not topics.get(name, {}).get('messages'):
             findings.append(f'{name}: no message recorded')
-    clock = topics.get('/clock', {})
+    clock = topics.get(contract.CLOCK.name, {})
     if steps is not None and clock.get('messages'):
         if clock.get('first_step') != 1 or clock.get('last_step') != steps:
             findings.append(f"/clock covers steps {clock.get('first_step')}-"

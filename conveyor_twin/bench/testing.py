@@ -63,17 +63,19 @@ def make_controller(context: Any) -> Any:
     from conveyor_twin_msgs.msg import BeltCommand, LightBarrierEdge, LightBarrierStates
     from rclpy.node import Node
 
+    from conveyor_twin import contract
     from conveyor_twin.ros.qos import COMMAND_QOS, EDGE_QOS, STREAM_QOS
 
     class StopOnBarrier(Node):
         def __init__(self) -> None:
             super().__init__('bench_stop_on_barrier', context=context)
             self.stopped_at_ns = None
-            self.commands = self.create_publisher(BeltCommand, 'belt_command', COMMAND_QOS)
-            self.create_subscription(LightBarrierEdge, 'light_barrier_edges', self.on_edge,
-                                     EDGE_QOS)
-            self.create_subscription(LightBarrierStates, 'light_barriers', self.on_states,
-                                     STREAM_QOS)
+            self.commands = self.create_publisher(BeltCommand, contract.BELT_COMMAND.name,
+                                                  COMMAND_QOS)
+            self.create_subscription(LightBarrierEdge, contract.LIGHT_BARRIER_EDGES.name,
+                                     self.on_edge, EDGE_QOS)
+            self.create_subscription(LightBarrierStates, contract.LIGHT_BARRIERS.name,
+                                     self.on_states, STREAM_QOS)
 
         def on_edge(self, edge: LightBarrierEdge) -> None:
             if edge.name == 'lb_infeed' and edge.blocked and self.stopped_at_ns is None:

@@ -160,10 +160,12 @@ def subscriber_main(argv: List[str]) -> int:
     from rclpy.qos import QoSProfile
 
     from conveyor_twin.coord.runner import freeze_heap
+    from conveyor_twin import contract
     from conveyor_twin.ros.qos import CLOCK_QOS, COMMAND_QOS, SLOW_QOS, STREAM_QOS
 
-    types = {'parts': PartStates, 'light_barriers': LightBarrierStates,
-             'belt_states': BeltStates, 'actuator_states': ActuatorStates, '/clock': Clock}
+    types = {contract.PARTS.name: PartStates, contract.LIGHT_BARRIERS.name: LightBarrierStates,
+             contract.BELT_STATES.name: BeltStates,
+             contract.ACTUATOR_STATES.name: ActuatorStates, contract.CLOCK.name: Clock}
     context = Context()
     rclpy.init(context=context)
     node = Node('bench_twin_subscriber', context=context)
@@ -186,7 +188,7 @@ def subscriber_main(argv: List[str]) -> int:
     # subscribes with depth 1 and wants only the newest. Here every reader keeps 1000 so that
     # "lost" counts what the twin did not deliver, not what this reader overwrote.
     def reader_qos(topic: str) -> QoSProfile:
-        offered = CLOCK_QOS if topic == '/clock' else STREAM_QOS
+        offered = CLOCK_QOS if topic == contract.CLOCK.name else STREAM_QOS
         return QoSProfile(depth=READER_DEPTH, reliability=offered.reliability,
                           durability=offered.durability)
 
@@ -214,11 +216,11 @@ def subscriber_main(argv: List[str]) -> int:
                     log[1].append(int.from_bytes(data[4:8], 'little') * 1_000_000_000
                                   + int.from_bytes(data[8:12], 'little'))
     subs.append(node.create_subscription(
-        DiagnosticArray, 'diagnostics',
+        DiagnosticArray, contract.DIAGNOSTICS.name,
         lambda m: diagnostics.append({kv.key: kv.value for kv in m.status[0].values}),
         SLOW_QOS))
-    spawn = node.create_client(SpawnParts, 'spawn_parts')
-    belt = node.create_publisher(BeltCommand, 'belt_command', COMMAND_QOS)
+    spawn = node.create_client(SpawnParts, contract.SPAWN_PARTS.name)
+    belt = node.create_publisher(BeltCommand, contract.BELT_COMMAND.name, COMMAND_QOS)
 
     def spin_for(seconds: float, until=lambda: False) -> bool:
         end = time.monotonic() + seconds
@@ -486,7 +488,8 @@ def _print(figures: Dict[str, object]) -> None:
     if floor.get('windows'):
         counts = [w.get('overruns', w.get('error')) for w in floor['windows']]
         ratio = figures.get('overruns_vs_floor')
-        print(f"  host floor (paced C loop, {floor['windows'][0].get('policy')}) before/after: "
+        print(f"  host floor (paced C loop, {floor['windows'][0].get('policy')}, latency request "
+              f"{floor['windows'][0].get('latency_request')}) before/after: "
               f"{counts} overruns in {[w.get('duration_s') for w in floor['windows']]} s = "
               f"{floor.get('overruns_per_min')} per min; twin {figures.get('overruns_per_min')} "
               f"per min; twin / floor "

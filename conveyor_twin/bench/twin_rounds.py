@@ -5,8 +5,11 @@ from typing import Dict, List
 
 import numpy as np
 
+from conveyor_twin import contract
+
 #: The streams measured, as :mod:`conveyor_twin.bench.twin` names them.
-STREAMS = ('parts', 'light_barriers', 'belt_states', 'actuator_states', '/clock')
+STREAMS = tuple(t.name for t in (contract.PARTS, contract.LIGHT_BARRIERS, contract.BELT_STATES,
+                                 contract.ACTUATOR_STATES, contract.CLOCK))
 STEP_NS = 1_000_000
 
 

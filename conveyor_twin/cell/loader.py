@@ -30,7 +30,7 @@ _INF = math.inf
 T = TypeVar('T')
 
 
-class _Reader:
+class KeyReader:
     """Read keys of one YAML mapping, checking each; :meth:`done` rejects keys not read."""
 
     def __init__(self, file: str, path: str, data: Any) -> None:
@@ -108,11 +108,11 @@ class _Reader:
                             f'each within +-{COORDINATE_LIMIT:g}')
         return (float(value[0]), float(value[1]), float(value[2]), float(value[3]))
 
-    def section(self, key: str, required: bool = False) -> '_Reader':
+    def section(self, key: str, required: bool = False) -> 'KeyReader':
         value = self.raw(key, _REQUIRED if required else {})
         return type(self)(self.file, self.key_path(key), value)   # a subclass reads on
 
-    def items(self, key: str, required: bool = True) -> List['_Reader']:
+    def items(self, key: str, required: bool = True) -> List['KeyReader']:
         value = self.raw(key, _REQUIRED if required else [])
         if not isinstance(value, list) or (required and not value):
             raise self.fail(key, value, 'a non-empty list of mappings' if required else 'a list')
@@ -146,7 +146,7 @@ def _is_coordinate(value: Any) -> bool:
     return _is_finite(value) and abs(value) <= COORDINATE_LIMIT
 
 
-def _check_number(reader: _Reader, key: str, value: Any, low: float, high: float,
+def _check_number(reader: KeyReader, key: str, value: Any, low: float, high: float,
                   low_open: bool) -> float:
     bracket = '(' if low_open else '['
     expected = f'a finite number in {bracket}{low:g}, {high:g}]'
@@ -165,7 +165,7 @@ def _check_point(file: str, path: str, value: Any) -> Point:
     return (float(value[0]), float(value[1]))
 
 
-def _unique(readers: List[_Reader], items: Sequence[T], what: str) -> None:
+def _unique(readers: List[KeyReader], items: Sequence[T], what: str) -> None:
     names: Dict[str, int] = {}
     for reader, item in zip(readers, items):
         name = getattr(item, 'name')
@@ -174,7 +174,7 @@ def _unique(readers: List[_Reader], items: Sequence[T], what: str) -> None:
         names[name] = 1
 
 
-def _settings(r: _Reader) -> Settings:
+def _settings(r: KeyReader) -> Settings:
     settings = Settings(
         name=r.string('name'),
         frame_id=r.string('frame_id', 'cell'),
@@ -186,7 +186,7 @@ def _settings(r: _Reader) -> Settings:
     return settings
 
 
-def _belt(r: _Reader) -> Belt:
+def _belt(r: KeyReader) -> Belt:
     start, end = r.point('start'), r.point('end')
     if math.hypot(end[0] - start[0], end[1] - start[1]) <= 0.0:
         raise r.fail('end', list(end), 'a point different from start (a belt of positive length)')
@@ -212,7 +212,7 @@ def _is_convex_ccw(points: Tuple[Point, ...]) -> bool:
     return True
 
 
-def _obstacle(r: _Reader) -> Obstacle:
+def _obstacle(r: KeyReader) -> Obstacle:
     name = r.string('name')
     kind = ObstacleKind(r.string('kind', choices=OBSTACLE_KINDS))
     thickness, radius = 0.0, 0.0
@@ -244,7 +244,7 @@ def _obstacle(r: _Reader) -> Obstacle:
     return obstacle
 
 
-def _part_type(r: _Reader) -> PartType:
+def _part_type(r: KeyReader) -> PartType:
     name = r.string('name')
     shape = r.string('shape', choices=PART_SHAPES)
     mass = r.number('mass', low=0.0, high=1e3, low_open=True)
@@ -272,7 +272,7 @@ def _part_type(r: _Reader) -> PartType:
     return part_type
 
 
-def _source(r: _Reader, part_names: Sequence[str]) -> Source:
+def _source(r: KeyReader, part_names: Sequence[str]) -> Source:
     name = r.string('name')
     part_type = r.string('part_type')
     if part_type not in part_names:
@@ -302,13 +302,13 @@ def _source(r: _Reader, part_names: Sequence[str]) -> Source:
     return source
 
 
-def _sink(r: _Reader) -> Sink:
+def _sink(r: KeyReader) -> Sink:
     sink = Sink(name=r.string('name'), region=r.rect('region'))
     r.done()
     return sink
 
 
-def _light_barrier(r: _Reader) -> LightBarrier:
+def _light_barrier(r: KeyReader) -> LightBarrier:
     start, end = r.point('start'), r.point('end')
     if start == end:
         raise r.fail('end', list(end), 'a point different from start (a beam of positive length)')
@@ -318,7 +318,7 @@ def _light_barrier(r: _Reader) -> LightBarrier:
     return barrier
 
 
-def _actuator(r: _Reader) -> Actuator:
+def _actuator(r: KeyReader) -> Actuator:
     name = r.string('name')
     kind = r.string('kind', choices=ACTUATOR_KINDS)
     axis = r.point('axis')
@@ -353,7 +353,7 @@ def _actuator(r: _Reader) -> Actuator:
     return actuator
 
 
-def _zone(r: _Reader) -> Zone:
+def _zone(r: KeyReader) -> Zone:
     name = r.string('name')
     policy = ZonePolicy(r.string('policy', 'micro', choices=ZONE_POLICIES))
     region = r.rect('region')
@@ -374,7 +374,7 @@ def _zone(r: _Reader) -> Zone:
     return Zone(name=name, policy=policy, region=region, resolution=resolution, auto=auto)
 
 
-def _micro(r: _Reader) -> MicroModel:
+def _micro(r: KeyReader) -> MicroModel:
     model = MicroModel(
         contact=ContactModel(r.string('contact', 'impulse', choices=CONTACT_MODELS)),
         capacity=r.integer('capacity', 20000, low=1, high=10_000_000),
@@ -390,7 +390,7 @@ def _micro(r: _Reader) -> MicroModel:
     return model
 
 
-def _macro(r: _Reader) -> MacroModel:
+def _macro(r: KeyReader) -> MacroModel:
     model = MacroModel(
         variant=MacroVariant(r.string('variant', 'goettlich', choices=MACRO_VARIANTS)),
         scheme=MacroScheme(r.string('scheme', 'upwind', choices=MACRO_SCHEMES)),
@@ -403,7 +403,7 @@ def _macro(r: _Reader) -> MacroModel:
     return model
 
 
-def _list(top: _Reader, key: str, build: Callable[[_Reader], T], what: str,
+def _list(top: KeyReader, key: str, build: Callable[[KeyReader], T], what: str,
           required: bool = False) -> Tuple[T, ...]:
     readers = top.items(key, required=required)
     items = [build(reader) for reader in readers]
@@ -418,7 +418,7 @@ def cell_from_mapping(data: Any, source_file: str = '<memory>') -> Cell:
     :param source_file: name used in error messages.
     :raises CellError: on the first problem found.
     """
-    top = _Reader(source_file, '', data)
+    top = KeyReader(source_file, '', data)
     settings = _settings(top.section('cell', required=True))
     belts = _list(top, 'belts', _belt, 'belt', required=True)
     obstacles = _list(top, 'obstacles', _obstacle, 'obstacle')

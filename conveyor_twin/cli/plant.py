@@ -91,7 +91,7 @@ def _interrupts() -> List[bool]:
 
 def run_cell(plant: Plant, args: argparse.Namespace) -> int:
     """Run one cell until the plant's end step (every cell done) or a signal."""
-    from conveyor_twin.ros.plant_node import PlantCellNode
+    from conveyor_twin.ros.plant_cell_node import PlantCellNode
     end = int(round(args.duration / plant.step)) if args.duration > 0 else 0
     run = args.run_id if args.run_id is not None else time.time_ns() & 0xFFFFFFFFFFFF
     context = _init_ros()
@@ -157,7 +157,8 @@ def _cell_command(args: argparse.Namespace, name: str) -> List[str]:
 def run_plant(plant: Plant, args: argparse.Namespace) -> int:
     """Run the whole plant (processes or composed), print progress and the summary."""
     from conveyor_twin.plant.supervisor import CellProcesses
-    from conveyor_twin.ros.plant_node import ComposedPlant, PlantMonitor
+    from conveyor_twin.ros.plant_monitor import PlantMonitor
+    from conveyor_twin.ros.plant_node import ComposedPlant
     end = int(round(args.duration / plant.step)) if args.duration > 0 else 0
     context = _init_ros()
     stop = _interrupts()

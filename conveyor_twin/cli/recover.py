@@ -23,6 +23,7 @@ from typing import List
 
 from conveyor_twin.record import reader
 from conveyor_twin.record.errors import RecordingError
+from conveyor_twin.record.writer import Compression
 
 COMPLETE, UNREADABLE, PARTIAL = 0, 1, 3
 
@@ -40,7 +41,8 @@ def main(argv: List[str]) -> int:
     p.add_argument('file', help='damaged MCAP recording')
     p.add_argument('-o', '--output', default=None, help='file to write (default: '
                    'FILE.recovered.mcap)')
-    p.add_argument('--compression', default='lz4', choices=('lz4', 'zstd', 'none'))
+    p.add_argument('--compression', default=Compression.LZ4.value,
+                   choices=[c.value for c in Compression])
     p.add_argument('--json', action='store_true', help='print the report as one JSON object')
     args = p.parse_args(argv)
     out = args.output or default_output(args.file)

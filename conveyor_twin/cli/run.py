@@ -9,24 +9,21 @@ its traceback, ERROR in the diagnostics, named in the summary).
 """
 
 import argparse
-from collections import deque
 import json
 import os
 import signal
-import subprocess
 import sys
-import threading
 import time
-from typing import Deque, Dict, IO, List
+from typing import List
 
 from conveyor_twin.cell import CellError, load_cell
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health
 
 DEFAULT_DURATION = 10.0  # s of simulated time
-LOG_TAIL_LINES = 20  # lines of a dead node process's log shown in its report
-CHILD_POLL = 0.1  # s between two checks that the split layout's processes live
-COORDINATOR_GRACE = 30.0  # s the coordinator may take to stop after a node process died
+# s between two looks of the main thread at the run (a failure wakes it at once): every wake-up
+# takes the interpreter lock, which a step in progress then hands over
+MAIN_POLL = 0.1
 
 
 def ros_environment() -> None:
@@ -59,8 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "cell's state (docs/faults.md); checked before the twin starts")
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
     p.add_argument('--quiet', action='store_true', help='no progress line')
-    from conveyor_twin.ros.run_recording import add_arguments
-    add_arguments(p)
+    from conveyor_twin.cli.record import add_recording_arguments
+    add_recording_arguments(p)
     return p
 
 
@@ -133,9 +130,11 @@ def run_composed(args: argparse.Namespace) -> int:
         context.try_shutdown()
         return 2
     from conveyor_twin.record.errors import RecordingError
+    from conveyor_twin.cli.record import recording_options
     from conveyor_twin.ros.run_recording import format_recording, start_recording
     try:
-        recording = start_recording(twin, args, seed=seed, mode=mode.value)
+        recording = start_recording(twin, recording_options(args), seed=seed,
+                                    mode=mode.value)
     except (ValueError, RecordingError) as exc:
         print(f'conveyor-twin run: {exc}', file=sys.stderr)
         twin.stop()
@@ -157,7 +156,7 @@ def run_composed(args: argparse.Namespace) -> int:
                 break
             if max_steps is not None and twin.twin.step_index >= max_steps:
                 break
-            health.event.wait(0.02)
+            health.event.wait(MAIN_POLL)
             if not args.quiet and time.monotonic() >= next_progress:
                 next_progress += 1.0
                 line = _progress(twin.coordinator.summary(), time.monotonic() - start)
@@ -194,63 +193,9 @@ def _failure_exit(summary: dict) -> int:
     return EXIT_BACKGROUND_FAILURE
 
 
-class _Child:
-    """A node process of the split layout whose log is passed on to our stderr, keeping its
-    last lines for a report should it die.
-
-    :param read_stdout: the caller reads the process's stdout (the coordinator's summary);
-        otherwise stdout joins the log (our stdout stays the summary's alone).
-    """
-
-    def __init__(self, name: str, argv: List[str], env: Dict[str, str], *,
-                 read_stdout: bool = False) -> None:
-        self.name = name
-        self.tail: Deque[str] = deque(maxlen=LOG_TAIL_LINES)
-        self.proc = subprocess.Popen(
-            argv, env=env, stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE if read_stdout else subprocess.STDOUT,
-            text=True, errors='replace')
-        log = self.proc.stderr if read_stdout else self.proc.stdout
-        self._relay_thread = threading.Thread(target=self._relay, args=(log,),
-                                              name=f'{name}_log', daemon=True)
-        self._relay_thread.start()
-
-    def _relay(self, stream: IO[str]) -> None:
-        for line in stream:
-            self.tail.append(line)
-            sys.stderr.write(line)
-        sys.stderr.flush()
-
-    def report(self, health: Health, when: str) -> None:
-        """Report this process's end to ``health`` with its exit code and log tail."""
-        self._relay_thread.join(2.0)  # the rest of what it wrote
-        code = self.proc.returncode
-        tail = ''.join(self.tail) or '(it wrote nothing)\n'
-        health.report(f'{self.name} process', message=f'exited with code {code} {when}',
-                      detail=f'last lines of its log:\n{tail}')
-
-
-def _watch(children: List[_Child], coordinator: _Child, health: Health,
-           done: threading.Event) -> None:
-    """Report a node process that ends before the run is over; give the coordinator
-    :data:`COORDINATOR_GRACE` to stop by itself, then interrupt it."""
-    failed_at = None
-    while not done.wait(CHILD_POLL):
-        for child in children:
-            if child.proc.poll() is not None and not done.is_set():
-                child.report(health, 'during the run')
-                if failed_at is None:
-                    failed_at = time.monotonic()
-        if (failed_at is not None and time.monotonic() - failed_at > COORDINATOR_GRACE
-                and coordinator.proc.poll() is None):
-            coordinator.proc.send_signal(signal.SIGINT)
-            failed_at = float('inf')
-
-
 def run_split(args: argparse.Namespace) -> int:
     """Start the three node processes, wait for the coordinator, print its summary."""
-    from conveyor_twin.ros.split import ros_args, SCALE_PIDS_ENV, SUMMARY_PREFIX
-    from conveyor_twin.ros.standalone import IGNORE_SIGINT_ENV
+    from conveyor_twin.split.launch import launch, ros_args, SUMMARY_PREFIX
 
     cell_file = os.path.abspath(args.cell) if args.cell else ''
     try:
@@ -269,20 +214,11 @@ def run_split(args: argparse.Namespace) -> int:
     process_args = ros_args(cell_file, args.seed, args.mode, args.duration, args.namespace,
                             args.markers_rate, foxglove=args.foxglove or '',
                             scenario=scenario_file)
-    env = dict(os.environ)
     health = Health()  # this process's view of the three node processes
-    scale_env = dict(env, **{IGNORE_SIGINT_ENV: '1'})  # stopped by SIGTERM, after the coordinator
-    scales = [_Child(name, [sys.executable, '-m', module] + process_args, scale_env)
-              for name, module in (('micro_simulator', 'conveyor_twin.ros.micro_node'),
-                                   ('macro_simulator', 'conveyor_twin.ros.macro_node'))]
-    env[SCALE_PIDS_ENV] = ','.join(f'{c.name}={c.proc.pid}' for c in scales)
-    coordinator = _Child('scale_coordinator',
-                         [sys.executable, '-m', 'conveyor_twin.ros.split'] + process_args, env,
-                         read_stdout=True)
-    done = threading.Event()  # set once the coordinator ended: the others are stopped now
-    watcher = threading.Thread(target=_watch, args=(scales, coordinator, health, done),
-                               name='conveyor_twin_watch', daemon=True)
-    watcher.start()
+    # the scale processes ignore SIGINT: stopped by SIGTERM, after the coordinator
+    processes = launch(process_args, ignore_sigint=True)
+    coordinator = processes.coordinator
+    processes.watch(health)
     summary = None
 
     def read_until_eof() -> None:
@@ -302,19 +238,9 @@ def run_split(args: argparse.Namespace) -> int:
             read_until_eof()
         code = coordinator.proc.wait(30)
     finally:
-        done.set()
-        watcher.join(5.0)
-        for child in scales:
-            if child.proc.poll() is None:
-                child.proc.send_signal(signal.SIGTERM)
-        deadline = time.monotonic() + 10.0
-        for child in scales:
-            try:
-                child.proc.wait(max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                child.proc.kill()
-                child.proc.wait()
-    for child in scales:  # a thread of it failed while it stopped
+        processes.end_watch()
+        processes.stop_scales()
+    for child in processes.scales:  # a thread of it failed while it stopped
         if child.proc.returncode == EXIT_BACKGROUND_FAILURE:
             child.report(health, 'after a failure of one of its threads')
     if summary is None:

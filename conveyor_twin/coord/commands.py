@@ -10,12 +10,18 @@ from collections import Counter, deque
 from dataclasses import dataclass
 import math
 import threading
-from typing import Deque, Dict, List, Optional, Tuple
+from typing import Deque, Dict, List, Tuple
 
-from conveyor_twin.cell.model import Cell
+from conveyor_twin.cell.model import Cell, Mode
 
-BELT = 'belt'
-ACTUATOR = 'actuator'
+
+class CommandKind(Mode):
+    """What a command moves (a ``str`` Enum: members equal, print and record as their value)."""
+
+    BELT = 'belt'          # value: target speed [m/s]
+    ACTUATOR = 'actuator'  # value: target position [m or rad]
+
+
 #: Largest ``sequence`` a command may carry (its wire type is uint32).
 SEQUENCE_MAX = 2**32 - 1
 
@@ -31,7 +37,7 @@ class Command:
     :param sequence: the sender's number of it (uint32; 0 if it did not say).
     """
 
-    kind: str
+    kind: CommandKind
     name: str
     index: int
     value: float
@@ -96,7 +102,7 @@ class CommandBook:
             raise self.reject('out_of_range', f'belt_command: speed {speed!r} m/s for belt '
                                f'{belt!r} is outside [{-max_speed:g}, {max_speed:g}] m/s')
         self._check_origin('belt_command', sender, sequence)
-        return Command(BELT, belt, index, float(speed), -1, sender, sequence)
+        return Command(CommandKind.BELT, belt, index, float(speed), -1, sender, sequence)
 
     def validate_actuator(self, actuator: str, position: float, sender: str = '',
                           sequence: int = 0) -> Command:
@@ -115,7 +121,7 @@ class CommandBook:
                                f'{unit} for actuator {actuator!r} is outside '
                                f'[{low:g}, {high:g}] {unit}')
         self._check_origin('actuator_command', sender, sequence)
-        return Command(ACTUATOR, actuator, index, float(position), -1, sender, sequence)
+        return Command(CommandKind.ACTUATOR, actuator, index, float(position), -1, sender, sequence)
 
     def submit(self, command: Command) -> None:
         """Queue a validated command for the next step boundary (thread-safe)."""

@@ -1,5 +1,12 @@
 """The stepping thread: realtime on absolute deadlines, or as fast as possible.
 
+One loop for everything that steps: a cell's :class:`~conveyor_twin.coord.twin.Twin` (any
+layout) and a plant's cells. :class:`Runner` steps a :class:`Steppable`, optionally behind a
+:class:`StepGate` that says whether the next step may run now (a plant cell's conservative
+synchronisation, :mod:`conveyor_twin.plant.sync`): while it says no, the runner sleeps on the
+gate's ``wake`` event and restarts its realtime deadlines afterwards, so a wait for input is
+never an overrun.
+
 Lockstep needs no thread: whoever asks (the ``step`` service, a test) calls :meth:`Runner.step`.
 Every step's duration (the twin's step and everything its listeners do, e.g. publishing) is
 recorded in :attr:`Runner.stats`; in realtime a step that ends after its deadline is an overrun.
@@ -10,10 +17,10 @@ import os
 import sys
 import threading
 import time
-from typing import Callable, Iterable, Optional, Set
+from typing import Callable, ContextManager, Iterable, List, Optional, Protocol, Set
 
 from conveyor_twin.coord.timing import DeadlinePacer, StepStats, TimeMode
-from conveyor_twin.coord.twin import Twin
+from conveyor_twin.health import Health
 
 # GIL switch interval while a realtime loop runs [s]: Python's 5 ms default lets another thread
 # (the ROS executor serving a service or a command) hold the GIL for up to 5 steps.
@@ -26,6 +33,8 @@ REALTIME_PRIORITY = 10
 PRIORITY_ENV = 'CONVEYOR_TWIN_RT_PRIORITY'
 #: Name under which a failed step of the stepping thread is reported to the twin's health.
 STEPPING_THREAD = 'stepping thread'
+#: Longest sleep on a closed gate's ``wake`` event before the runner asks it again [s].
+GATE_WAIT = 0.05
 
 
 def realtime_priority(helper: bool = False) -> int:
@@ -95,21 +104,73 @@ def raise_threads(tids: Iterable[int], priority: int) -> int:
     return raised
 
 
-class Runner:
-    """Advance a :class:`Twin` according to a :class:`TimeMode`.
+class Steppable(Protocol):
+    """What a :class:`Runner` steps: a :class:`~conveyor_twin.coord.twin.Twin`, a plant cell.
 
-    :param twin: the twin to step.
+    A steppable may also have ``stages``, ``cell`` and ``seed`` (a twin): realtime then loads
+    its kernels first (:attr:`Runner.warm_up`).
+    """
+
+    #: Step period [ns].
+    dt_ns: int
+    #: Where the stepping thread reports its failure.
+    health: Health
+
+    def step(self, n: int = 1) -> object:
+        """Advance ``n`` steps."""
+
+
+class StepGate(Protocol):
+    """Whether a gated :class:`Runner` may run its next step now (e.g. a plant cell may run
+    only as far ahead of its neighbours as the link delays allow).
+
+    The runner asks :meth:`may_step` and runs the step with :attr:`lock` held (whoever feeds
+    the gate new input takes the lock too, so the answer holds for the step). While the gate
+    says no, the runner calls :meth:`blocked`, then sleeps on :attr:`wake` (which the gate's
+    owner sets when new input arrives) for at most :data:`GATE_WAIT`, and asks again.
+    """
+
+    lock: ContextManager
+    wake: threading.Event
+
+    def may_step(self) -> bool:
+        """True if the next step may run now."""
+
+    def blocked(self) -> None:
+        """Called on the stepping thread before each wait for input (e.g. to send what the
+        neighbours need to move on)."""
+
+
+class Runner:
+    """Advance a :class:`Steppable` (a :class:`~conveyor_twin.coord.twin.Twin`) according to a
+    :class:`TimeMode`.
+
+    :param twin: what to step.
     :param mode: realtime, fast or lockstep.
     :param max_steps: stop after this many steps (None: until :meth:`stop`).
     :param on_error: called with the exception if a step raises; the thread then stops.
-        The exception is first reported to ``twin.health`` as :data:`STEPPING_THREAD`.
+        The exception is first reported to ``twin.health`` as ``name``.
+    :param gate: step only when it allows (:class:`StepGate`); None: always.
+    :param chunk: fast mode without a gate: steps per call of ``twin.step`` (the statistics
+        get each call's mean per step).
+    :param name: what a failure of the stepping thread is reported as.
+
+    Attributes to set before :meth:`start`: :attr:`warm_up`, :attr:`tuned`, :attr:`listeners`.
     """
 
-    def __init__(self, twin: Twin, mode: TimeMode, *, max_steps: Optional[int] = None,
-                 on_error: Optional[Callable[[BaseException], None]] = None) -> None:
+    def __init__(self, twin: Steppable, mode: TimeMode, *, max_steps: Optional[int] = None,
+                 on_error: Optional[Callable[[BaseException], None]] = None,
+                 gate: Optional[StepGate] = None, chunk: int = 1,
+                 name: str = STEPPING_THREAD) -> None:
+        if chunk < 1 or (gate is not None and chunk != 1):
+            raise ValueError(f'Runner: chunk {chunk}: expected an integer >= 1, and 1 with a '
+                             'gate (the gate allows one step at a time)')
         self.twin = twin
         self.mode = TimeMode(mode)
         self.max_steps = max_steps
+        self.gate = gate
+        self.chunk = chunk
+        self.name = name
         self.stats = StepStats()
         self.pacer = DeadlinePacer(twin.dt_ns)
         self.steps_done = 0
@@ -121,6 +182,11 @@ class Runner:
         self.wall_end = 0.0
         self.priority = 0  # SCHED_FIFO priority the realtime thread got (0: normal)
         self.warm_up = True  # realtime: load the kernels on a scratch twin before starting
+        #: Realtime: raise the thread's priority, shorten the GIL switch interval and freeze
+        #: the heap while the loop runs.
+        self.tuned = True
+        #: Called on the stepping thread after each call of ``twin.step``, outside its timing.
+        self.listeners: List[Callable[[], None]] = []
 
     @property
     def overruns(self) -> int:
@@ -141,44 +207,108 @@ class Runner:
         Realtime first loads every per-step kernel on a scratch copy of the cell
         (:func:`~conveyor_twin.coord.warmup.warm_up`), so no step waits for numba.
         """
-        if self.mode is TimeMode.REALTIME and self.warm_up and self.twin.stages:
+        if (self.mode is TimeMode.REALTIME and self.warm_up
+                and getattr(self.twin, 'stages', None)):
             from conveyor_twin.coord.warmup import warm_up
             warm_up(self.twin.cell, self.twin.seed)
         self.wall_start = time.monotonic()
         if self.mode is TimeMode.LOCKSTEP:
             return
         self._stop.clear()
-        self._thread = threading.Thread(target=self._loop, name='conveyor_twin_steps',
+        self._thread = threading.Thread(target=self.run, name='conveyor_twin_steps',
                                         daemon=True)
         self._thread.start()
 
-    def _loop(self) -> None:
+    def run(self) -> None:
+        """Step in the calling thread until :meth:`stop`, ``max_steps`` or a failure (what
+        :meth:`start`'s thread runs; lockstep steps as fast mode does). A failure is reported
+        to ``twin.health`` as :attr:`name`, kept in :attr:`error` and given to ``on_error``.
+        """
         realtime = self.mode is TimeMode.REALTIME
+        tuned = realtime and self.tuned
         switch_interval = sys.getswitchinterval()
-        if realtime:
+        if tuned:
             sys.setswitchinterval(REALTIME_SWITCH_INTERVAL)
             self.priority = raise_thread_priority(realtime_priority())
             freeze_heap()
+        if realtime:
+            self.pacer.latency_request.acquire()
         self.pacer.restart()
         self.wall_start = time.monotonic()  # after the set-up above: rtf counts stepping only
         try:
-            while not self._stop.is_set():
-                if self.max_steps is not None and self.steps_done >= self.max_steps:
-                    break
-                self.step(1)
-                if realtime:
-                    self.pacer.wait_next()
+            if self.gate is not None:
+                self._gated_loop(realtime)
+            elif self.chunk == 1 and not self.listeners:
+                self._loop(realtime)
+            else:
+                self._chunked_loop(realtime)
         except BaseException as exc:  # reported, never swallowed silently
             self.error = exc
-            self.twin.health.report(STEPPING_THREAD, exc)
+            self.twin.health.report(self.name, exc)
             if self._on_error is not None:
                 self._on_error(exc)
         finally:
             self.wall_end = time.monotonic()
             sys.setswitchinterval(switch_interval)
-            if realtime:
+            self.pacer.close()  # withdraws the wake-up latency request
+            if tuned:
                 thaw_heap()
             self._stop.set()
+
+    def _loop(self, realtime: bool) -> None:
+        """One step at a time, nothing else (a twin: its listeners do the per-step work)."""
+        while not self._stop.is_set():
+            if self.max_steps is not None and self.steps_done >= self.max_steps:
+                break
+            self.step(1)
+            if realtime:
+                self.pacer.wait_next()
+
+    def _gated_loop(self, realtime: bool) -> None:
+        """One step at a time as the gate allows, then the listeners."""
+        gate, stats, listeners, pacer = self.gate, self.stats, self.listeners, self.pacer
+        step, may_step, lock, wake = self.twin.step, gate.may_step, gate.lock, gate.wake
+        stopped, clock, max_steps = self._stop.is_set, time.perf_counter, self.max_steps
+        while not stopped():
+            if max_steps is not None and self.steps_done >= max_steps:
+                break
+            with lock:
+                ready = may_step()
+                if ready:
+                    start = clock()
+                    step(1)
+                    stats.add(clock() - start)
+                    self.steps_done += 1
+            if not ready:
+                gate.blocked()
+                wake.wait(GATE_WAIT)
+                wake.clear()
+                if realtime:  # waiting for input is no overrun: new deadlines from now
+                    pacer.restart()
+                continue
+            for listener in listeners:
+                listener()
+            if realtime:
+                pacer.wait_next()
+
+    def _chunked_loop(self, realtime: bool) -> None:
+        """``chunk`` steps at a time in fast mode (else one), then the listeners."""
+        twin, stats, listeners = self.twin, self.stats, self.listeners
+        chunk = self.chunk if self.mode is TimeMode.FAST else 1
+        while not self._stop.is_set():
+            n = chunk
+            if self.max_steps is not None:
+                n = min(n, self.max_steps - self.steps_done)
+                if n <= 0:
+                    break
+            start = time.perf_counter()
+            twin.step(n)
+            stats.add((time.perf_counter() - start) / n)  # mean per step
+            self.steps_done += n
+            for listener in listeners:
+                listener()
+            if realtime:
+                self.pacer.wait_next()
 
     @property
     def running(self) -> bool:

@@ -6,10 +6,11 @@ the coordinator's :class:`StepInput` (actual belt speeds and actuator positions 
 so both scales see the same actuation whatever the process layout.
 
 Scale hand-over: the micro scale simulates the whole cell; a
-:class:`~conveyor_twin.coord.scale.ScaleCoupling` stepped after both stages moves parts and mass
+:class:`~conveyor_twin.coupling.scale.ScaleCoupling` stepped after both stages moves parts and mass
 between them, and light barriers in ``macro`` zones take their values and edges from the density
-(:mod:`conveyor_twin.coord.zone_barriers`): the micro stage is built with the holder of those
-values (:mod:`conveyor_twin.coord.assembly` wires both layouts).
+(:mod:`conveyor_twin.coupling.zone_barriers`): the micro stage is built with the holder of those
+values (:mod:`conveyor_twin.coord.assembly` wires the composed layout,
+:mod:`conveyor_twin.split.roles` the split one).
 """
 
 from typing import Dict, List, Optional, Tuple
@@ -19,7 +20,7 @@ import numpy as np
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.clock import step_ns
 from conveyor_twin.coord.step_input import StepInput
-from conveyor_twin.coord.zone_barriers import BarrierOverlay
+from conveyor_twin.coupling.zone_barriers import BarrierOverlay
 from conveyor_twin.faults.barriers import BarrierFaults
 from conveyor_twin.faults.material import MaterialFaults
 from conveyor_twin.macro.solver import MacroSim
@@ -196,7 +197,7 @@ class MacroStage:
         """Part balance over all grids: entered, left, in flight (fractional parts).
 
         (The whole cell's ledger is the scale coupling's:
-        :meth:`~conveyor_twin.coord.scale.ScaleCoupling.balance_counters`.)
+        :meth:`~conveyor_twin.coupling.scale.ScaleCoupling.balance_counters`.)
         """
         return {'entered': float(sum(g.parts_in + g.parts_deposited for g in self.grids)),
                 'left': float(sum(g.parts_out + g.parts_taken for g in self.grids)),

@@ -2,7 +2,7 @@
 
 The coordinator builds one :class:`StepInput` per step. Composed in one process, the stages get
 the object itself; split over processes, they get its bytes
-(:func:`conveyor_twin.coord.codec.pack_step_input`) over a ROS topic. Both carry the same
+(:func:`conveyor_twin.split.protocol.pack_step_input`) over a ROS topic. Both carry the same
 float64 values, which is what keeps the two layouts bit-identical.
 """
 

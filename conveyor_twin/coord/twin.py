@@ -8,8 +8,8 @@ Each step ``k`` (the state after it is stamped ``k * dt``):
 2. belt speeds and actuator positions move one step toward their targets (drive faults
    applied);
 3. one :class:`~conveyor_twin.coord.step_input.StepInput` is built, with the step's fault
-   events, and every local stage advances with it (remote stages get its bytes; see
-   ``conveyor_twin.ros``).
+   events, and every stage advances with it (split, the one stage is the scale processes,
+   which get its bytes: :class:`~conveyor_twin.split.remote.RemoteStage`).
 """
 
 import threading
@@ -18,7 +18,7 @@ from typing import Callable, List, Optional, Protocol, Sequence
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.actuation import Actuation
 from conveyor_twin.coord.clock import step_ns
-from conveyor_twin.coord.commands import ACTUATOR, BELT, Command, CommandBook
+from conveyor_twin.coord.commands import Command, CommandBook, CommandKind
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.faults.actuation import ActuationFaults
 from conveyor_twin.faults.book import FaultBook
@@ -42,7 +42,7 @@ class Twin:
     :param seed: random seed of the run (sources).
     :param stages: the stages stepped in this process, in order (the assembly,
         :func:`~conveyor_twin.coord.assembly.build_twin`, passes micro, macro and the scale
-        coupling; none in the coordinator process of the split layout).
+        coupling; the split layout's coordinator its remote stage).
     """
 
     def __init__(self, cell: Cell, *, seed: int, stages: Sequence[Stage] = ()) -> None:
@@ -100,9 +100,9 @@ class Twin:
 
     def _apply(self, commands: List[Command]) -> None:
         for command in commands:
-            if command.kind == BELT:
+            if command.kind == CommandKind.BELT:
                 self.actuation.set_belt_target(command.index, command.value)
-            elif command.kind == ACTUATOR:
+            elif command.kind == CommandKind.ACTUATOR:
                 self.actuation.set_actuator_target(command.index, command.value)
 
     def prepare(self) -> StepInput:

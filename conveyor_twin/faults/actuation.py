@@ -15,13 +15,14 @@ from typing import Any, Dict, List, Sequence, Tuple
 import numpy as np
 
 from conveyor_twin.cell.model import Cell
+from conveyor_twin.contract import ACTUATOR_COMMAND, BELT_COMMAND
 from conveyor_twin.faults.book import CLEAR, fault_rng, FaultEvent, steps_of
 from conveyor_twin.faults.model import ActiveFault
 
 # the coordinator's command kinds (``Command.kind``)
 BELT = 'belt'
 ACTUATOR = 'actuator'
-_TOPIC_KIND = {'belt_command': BELT, 'actuator_command': ACTUATOR}
+_TOPIC_KIND = {BELT_COMMAND.name: BELT, ACTUATOR_COMMAND.name: ACTUATOR}
 Command = Any  # conveyor_twin.coord.commands.Command (the coordinator sits above this layer)
 Actuation = Any  # conveyor_twin.coord.actuation.Actuation
 _COMMAND_FAULTS = ('command_drop', 'command_delay', 'belt_ignore_commands',

@@ -13,7 +13,7 @@ or deliver the wrong type (no ROS imports).
   delivers ``part_type``. Both are undone when cleared.
 
 The density of ``macro``/``auto`` zones in a vanishing rectangle is removed by the scale
-hand-over (:class:`~conveyor_twin.coord.scale.ScaleCoupling`), which owns the per-type ledger.
+hand-over (:class:`~conveyor_twin.coupling.scale.ScaleCoupling`), which owns the per-type ledger.
 """
 
 from typing import Dict, Sequence, Tuple

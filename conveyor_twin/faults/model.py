@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import math
 from typing import Dict, Optional, Tuple
 
+from conveyor_twin import contract
 from conveyor_twin.cell.model import Cell
 
 # what a fault acts on
@@ -22,10 +23,10 @@ SOURCE = 'source'
 STREAM = 'stream'
 COMMAND_TOPIC = 'command_topic'
 
-#: Streams a ``stream_outage`` may silence (the contract's per-step and slow streams).
-OUTAGE_STREAMS = ('parts', 'density', 'light_barriers', 'light_barrier_edges', 'belt_states',
-                  'actuator_states', '/clock', 'diagnostics')
-COMMAND_TOPICS = ('belt_command', 'actuator_command')
+#: Streams a ``stream_outage`` may silence (:data:`conveyor_twin.contract.OUTAGE_STREAMS`).
+OUTAGE_STREAMS = tuple(t.name for t in contract.OUTAGE_STREAMS)
+#: Command topics a ``command_drop``/``command_delay`` acts on.
+COMMAND_TOPICS = tuple(t.name for t in contract.COMMANDS)
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ triggers fire at the same step as composed.
 from dataclasses import dataclass
 import math
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, List, Optional, Tuple
 
 import numpy as np
 import yaml

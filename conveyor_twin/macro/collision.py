@@ -74,20 +74,6 @@ def _face_row_range(rng: np.ndarray, f: int, ny: int):
 
 
 @njit(cache=True)
-def restore_rows(wx: np.ndarray, wy: np.ndarray, ux: np.ndarray, uy: np.ndarray,
-                 rng: np.ndarray) -> None:
-    """Reset the total face velocities of the work region ``rng`` to the belt field."""
-    ny = ux.shape[0]
-    for j in range(ny):
-        for f in range(rng[j, 0], rng[j, 1] + 1 if rng[j, 1] > rng[j, 0] else rng[j, 0]):
-            wx[j, f] = ux[j, f]
-    for f in range(ny + 1):
-        a, b = _face_row_range(rng, f, ny)
-        for i in range(a, b):
-            wy[f, i] = uy[f, i]
-
-
-@njit(cache=True)
 def restore_faces(wx: np.ndarray, wy: np.ndarray, ux: np.ndarray, uy: np.ndarray,
                   lohi: np.ndarray) -> None:
     """Reset to the belt field the faces :func:`collision_operator` sets for ``lohi``."""
@@ -136,12 +122,14 @@ def full_rows(rho: np.ndarray, full: float, lohi: np.ndarray) -> bool:
 
 
 @njit(cache=True, error_model='numpy')
-def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: float,
-                       h: float, w: np.ndarray, dx: np.ndarray, dy: np.ndarray,
-                       gx: np.ndarray, gy: np.ndarray, ux: np.ndarray, uy: np.ndarray,
-                       wx: np.ndarray, wy: np.ndarray, lohi: np.ndarray,
-                       rng: np.ndarray) -> bool:
+def collision_operator(field: tuple, rho_max: float, h: float, collision: tuple) -> bool:
     """Set the total face velocities ``wx = ux + Ix``, ``wy = uy + Iy`` [m/s] from ``rho``.
+
+    The arrays come in the groups of :func:`conveyor_twin.macro.solver.advance` (unpacked
+    here, no copies): ``field = (rho, ux, uy, wx, wy, solid)``: density [parts/m^2], belt and
+    total face velocities [m/s], solid mask; ``collision = (use_op, eps, w, dx, dy, gx, gy,
+    lohi, rng)``: strength ``eps`` [m/s] and the arrays below (``use_op`` is not read here).
+    ``rho_max`` [parts/m^2], cell edge ``h`` [m].
 
     ``grad(eta * rho)`` is computed as ``eta * grad(rho)``: the face differences of ``rho``
     (zero across faces touching a solid cell: no gradient through a wall) mollified with the
@@ -159,6 +147,8 @@ def collision_operator(rho: np.ndarray, solid: np.ndarray, rho_max: float, eps: 
     :param rng: work int64 ``(ny, 2)``: per-row work range.
     :return: True if the operator is active anywhere.
     """
+    rho, ux, uy, wx, wy, solid = field
+    _use_op, eps, w, dx, dy, gx, gy, lohi, rng = collision
     ny, nx = rho.shape
     restore_faces(wx, wy, ux, uy, lohi)
     full = rho_max * (1.0 - H_TOLERANCE)

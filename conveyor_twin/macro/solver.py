@@ -132,8 +132,7 @@ def advance(nsteps: int, nsub: int, dts: float, field: tuple, scheme: tuple, bou
         for _q in range(nsub):
             yrs = yr
             if use_op:
-                _col.collision_operator(rho, solid, rho_max, eps, h, w, dx, dy, gx, gy, ux, uy,
-                                        wx, wy, lohi, rng)
+                _col.collision_operator(field, rho_max, h, collision)
                 _merge_y_ranges(yr, lohi, yr_op)
                 yrs = yr_op
             if parity[0] % 2 == 0:

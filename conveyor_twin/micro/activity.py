@@ -59,13 +59,6 @@ class StiffnessPick:
     activity: Dict[str, float]
     trials: List[Tuple[float, float]] = field(default_factory=list)
 
-    @property
-    def satisfied(self) -> bool:
-        """True if the last trial met the fraction."""
-        return bool(self.trials) and self.trials[-1][1] == self.ratio and self._ok
-
-    _ok: bool = False
-
 
 def run_activity(cell: Cell, stiffness: float, damping: float, *, seed: int, duration: float,
                  settle: float = 0.0, positions: Optional[np.ndarray] = None,
@@ -115,7 +108,7 @@ def pick_contact_stiffness(cell: Cell, *, seed: int, duration: float,
                                 positions=positions)
         ratio = spring_ratio(activity)
         trials.append((k, ratio))
-        pick = StiffnessPick(k, c, ratio, activity, trials, ratio <= fraction)
+        pick = StiffnessPick(k, c, ratio, activity, trials)
         if ratio <= fraction or k >= max_stiffness:
             break
         k = min(max_stiffness, k * max(2.0, 1.25 * ratio / fraction))

@@ -23,10 +23,12 @@ from numba import njit
 
 from conveyor_twin.micro.actuators import actuator_shapes, AP_LENGTH, AP_WIDTH
 from conveyor_twin.micro.contacts.broad_phase import update_pairs
-from conveyor_twin.micro.contacts.narrow_phase import detect
-from conveyor_twin.micro.contacts.response import (correct_positions, limit_energy, MODE_PENALTY,
-                                                   penalty_forces, prepare_contacts,
+from conveyor_twin.micro.contacts.energy import limit_energy
+from conveyor_twin.micro.contacts.impulses import (correct_positions, prepare_contacts,
                                                    solve_impulses)
+from conveyor_twin.micro.contacts.narrow_phase import detect
+from conveyor_twin.micro.contacts.penalty import penalty_forces
+from conveyor_twin.micro.contacts.response import MODE_PENALTY
 from conveyor_twin.micro.contacts.tables import A_INERTIA, MP_DT, MP_TRACK
 from conveyor_twin.micro.drive import belt_drive, ramp
 from conveyor_twin.micro.sensors import update_barriers
@@ -117,9 +119,10 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
     gpar, gdim, cell_table, cell_items, part_cell, cand, nbr, pos0 = grid
     static_start, static_items, shp, shp_verts = statics
     va, vb, out, ct, cidx, acc, prev, island, island_sums = contacts
-    src, src_next, src_state, rng = sources
     sinks, sink_count, region, ob_id, ob_type, ob_P = exits
     lb, blocked, edge_count, last_part, ev_i, ev_f = barriers
+    # what a placement reads and writes (sources.place)
+    micro = (counters, ids, ptype, P, pt, shp, shp_verts, act_state, act_verts, va, vb, out)
     dt = cfg[CF_DT]
     mode = int(cfg[CF_MODE])
     impulse = mode != MODE_PENALTY
@@ -150,9 +153,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
             act_v[AV_RATE, a] = (act_v[AV_POSITION, a] - act_v[AV_PREVIOUS, a]) / dt
         # 2. sources, against the actuators where they start the step
         actuator_shapes(apar, act_v[AV_PREVIOUS], act_v[AV_RATE], act_state, act_verts)
-        run_sources((step - 1) * dt, src, src_next, src_state, rng, belts, belt_v[BV_SPEED],
-                    cfg[CF_FLOOR_MU], counters, ids, ptype, P, pt, shp, shp_verts, act_state,
-                    act_verts, va, vb, out)
+        run_sources((step - 1) * dt, sources, belts, belt_v[BV_SPEED], cfg[CF_FLOOR_MU], micro)
         n = counters[C_N]
         # 3. pose at the step's start
         for i in range(n):
@@ -186,8 +187,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
             if update_pairs(n, ids, ptype, x, y, pt, gpar, gdim, cell_table, cell_items,
                             part_cell, cand, nbr, pos0, skin) == 2:
                 counters[C_CONTACTS_FULL] += 1
-            nc = detect(n, ids, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items,
-                        shp, shp_verts, act_state, act_verts, va, vb, out, ct, cidx)
+            nc = detect(n, parts, pt, grid, statics, drives, contacts)
             if nc == ct.shape[0]:
                 counters[C_CONTACTS_FULL] += 1
             if mode == MODE_PENALTY:
@@ -204,8 +204,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                     tz[i] = wz[i]
                 prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, fx, fy, tz, prev)
                 solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev)
-                limit_energy(n, nc, ct, cidx, ptype, vx, vy, wz, fx, fy, tz, pt, prev, heat,
-                             island, island_sums)
+                limit_energy(n, nc, ptype, pt, (vx, vy, wz), (fx, fy, tz), heat, contacts)
             for i in range(n):
                 if impulse:
                     fx[i] = x[i]      # positions at detection, for correct_positions

@@ -133,38 +133,12 @@ def cross(r: np.ndarray, v: np.ndarray) -> float:
     return float(r[0] * v[1] - r[1] * v[0])
 
 
-def impulse_ref(va, wa, ma_inv, ia_inv, ra, vb, wb, mb_inv, ib_inv, rb, n, e, mu_s, mu_k, v_t):
-    """Return (va, wa, vb, wb) after one contact's normal then friction impulse."""
-    va, vb, ra, rb, n = (np.array(v, dtype=float) for v in (va, vb, ra, rb, n))
-
-    def point_velocity(v, w, r):
-        return v + w * np.array([-r[1], r[0]])
-
-    u = point_velocity(va, wa, ra) - point_velocity(vb, wb, rb)
-    un = u @ n
-    if un >= 0.0:
-        return va, wa, vb, wb
-    e = e if -un > 0.02 else 0.0
-    k = ma_inv + mb_inv + ia_inv * cross(ra, n) ** 2 + ib_inv * cross(rb, n) ** 2
-    jn = -(1.0 + e) * un / k
-    va, wa = va + jn * n * ma_inv, wa + ia_inv * cross(ra, jn * n)
-    vb, wb = vb - jn * n * mb_inv, wb - ib_inv * cross(rb, jn * n)
-    t = np.array([-n[1], n[0]])
-    ut = (point_velocity(va, wa, ra) - point_velocity(vb, wb, rb)) @ t
-    kt = ma_inv + mb_inv + ia_inv * cross(ra, t) ** 2 + ib_inv * cross(rb, t) ** 2
-    bound = friction_ref(mu_s, mu_k, v_t, abs(ut)) * jn
-    jt = min(max(-ut / kt, -bound), bound)
-    va, wa = va + jt * t * ma_inv, wa + ia_inv * cross(ra, jt * t)
-    vb, wb = vb - jt * t * mb_inv, wb - ib_inv * cross(rb, jt * t)
-    return va, wa, vb, wb
-
-
 def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np.ndarray,
                i_inv: np.ndarray, passes: int,
                heat: Optional[np.ndarray] = None) -> List[Tuple[float, float]]:
-    """Apply the impulses of :func:`conveyor_twin.micro.contacts.response.prepare_contacts`,
-    :func:`~conveyor_twin.micro.contacts.response.solve_impulses` and
-    :func:`~conveyor_twin.micro.contacts.response.limit_energy`; return the accumulated
+    """Apply the impulses of :func:`conveyor_twin.micro.contacts.impulses.prepare_contacts`,
+    :func:`~conveyor_twin.micro.contacts.impulses.solve_impulses` and
+    :func:`~conveyor_twin.micro.contacts.energy.limit_energy`; return the accumulated
     (normal, tangential) impulse of each contact.
 
     :param contacts: dicts with ``a``, ``b`` (-1: fixed), ``n``, ``ra``, ``rb``, ``e``,

@@ -51,7 +51,7 @@ EVENT_CAPACITY = 4096
 # Penalty model: largest omega * dt of the stiffest contact (symplectic Euler is stable < 2).
 PENALTY_OMEGA_DT = 0.5
 # Impulse model: sweeps over the contacts per substep, warm-started from the previous substep's
-# impulses (see the docstring of contacts.response); further sweeps change nothing for isolated
+# impulses (see the docstring of contacts.impulses); further sweeps change nothing for isolated
 # impacts and matter where contacts share bodies, as in a jam.
 CONTACT_PASSES = 2
 # Impulse model: sweeps of the penetration correction per substep (one keeps the benchmark jam's
@@ -227,6 +227,10 @@ class MicroSim:
             (self.sinks, self.sink_count, self.region_array, self._ob_id, self._ob_type,
              self._ob_P),
             (self.lb, self.blocked, self.edge_count, self.last_part, self._ev_i, self._ev_f))
+        # what sources.place reads and writes
+        self._placing = (s.counters, s.ids, s.part_type, s.P, self.pt, self.shapes,
+                         self.shape_verts, self.act_state, self.act_verts, self._va, self._vb,
+                         self._out)
 
     # --- time ---
     def step(self, n: int = 1) -> None:
@@ -348,9 +352,7 @@ class MicroSim:
             if k in skip:
                 continue
             px, py, pyaw, pvx, pvy, pwz = (float(a[k]) for a in arrays)
-            ids[k] = place(t, px, py, _wrap(pyaw), pvx, pvy, pwz, s.counters, s.ids,
-                           s.part_type, s.P, self.pt, self.shapes, self.shape_verts,
-                           self.act_state, self.act_verts, self._va, self._vb, self._out)
+            ids[k] = place(t, px, py, _wrap(pyaw), pvx, pvy, pwz, self._placing)
         refused = np.flatnonzero(ids == 0)
         if strict and refused.size:
             placed = int(np.count_nonzero(ids))
@@ -390,11 +392,8 @@ class MicroSim:
         The scalar fast path of :meth:`spawn` (``strict=False``) for the scale hand-over.
         :param x: [m]. :param y: [m]. :param yaw: [rad]. :param vx: [m/s]. :param wz: [rad/s].
         """
-        s = self.state
         return int(place(int(part_type), float(x), float(y), _wrap(float(yaw)), float(vx),
-                         float(vy), float(wz), s.counters, s.ids, s.part_type, s.P, self.pt,
-                         self.shapes, self.shape_verts, self.act_state, self.act_verts,
-                         self._va, self._vb, self._out))
+                         float(vy), float(wz), self._placing))
 
     def remove(self, ids: Optional[Sequence[int]] = None, *,
                mask: Optional[np.ndarray] = None) -> PartsView:

@@ -150,9 +150,16 @@ def overlaps(t, px, py, yaw, n, ptype, P, pt, shp, shp_verts, act_state, act_ver
 
 
 @njit(cache=True)
-def place(t, px, py, yaw, pvx, pvy, pwz, counters, ids, ptype, P, pt, shp, shp_verts,
-          act_state, act_verts, va, vb, out):
-    """Append a part unless it overlaps or the capacity is full; return its id or 0."""
+def place(t, px, py, yaw, pvx, pvy, pwz, micro):
+    """Append a part unless it overlaps or the capacity is full; return its id or 0.
+
+    :param t: part type index; ``px``, ``py`` [m], ``yaw`` [rad]; ``pvx``, ``pvy`` [m/s],
+        ``pwz`` [rad/s].
+    :param micro: ``(counters, ids, ptype, P, pt, shp, shp_verts, act_state, act_verts, va, vb,
+        out)``: the parts' state, the part types, the static shapes and the actuators (as in
+        :func:`overlaps`) and the scratch of the narrow phase (unpacked here, no copies).
+    """
+    counters, ids, ptype, P, pt, shp, shp_verts, act_state, act_verts, va, vb, out = micro
     n = counters[C_N]
     if n >= ids.size:
         return np.uint32(0)
@@ -178,9 +185,17 @@ def place(t, px, py, yaw, pvx, pvy, pwz, counters, ids, ptype, P, pt, shp, shp_v
 
 
 @njit(cache=True)
-def run_sources(time, src, src_next, src_state, rng, belts, belt_speed, floor_mu, counters,
-                ids, ptype, P, pt, shp, shp_verts, act_state, act_verts, va, vb, out):
-    """Let every source release the parts due by ``time`` [s] (at the start of a step)."""
+def run_sources(time, sources, belts, belt_speed, floor_mu, micro):
+    """Let every source release the parts due by ``time`` [s] (at the start of a step).
+
+    :param sources: ``(src, src_next, src_state, rng)``: the source table, each source's next
+        arrival [s], its pending and spawned counts and its random stream.
+    :param belts: the belt table, ``belt_speed`` their speeds [m/s], ``floor_mu`` the floor's
+        friction: a source without a velocity gives its parts that of the surface under them
+        (:func:`~conveyor_twin.micro.drive.surface_velocity`).
+    :param micro: what :func:`place` takes.
+    """
+    src, src_next, src_state, rng = sources
     for s in range(src.shape[0]):
         limit = int(src[s, SR_MAX])
         pattern = int(src[s, SR_PATTERN])
@@ -212,8 +227,7 @@ def run_sources(time, src, src_next, src_state, rng, belts, belt_speed, floor_mu
             else:
                 pvx = src[s, SR_VX]
                 pvy = src[s, SR_VY]
-            pid = place(t, px, py, yaw, pvx, pvy, 0.0, counters, ids, ptype, P, pt, shp,
-                        shp_verts, act_state, act_verts, va, vb, out)
+            pid = place(t, px, py, yaw, pvx, pvy, 0.0, micro)
             if pid != 0:
                 src_state[s, SS_PENDING] -= 1
                 src_state[s, SS_SPAWNED] += 1

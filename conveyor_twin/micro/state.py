@@ -6,7 +6,6 @@ Scalar counters live in one int64 array ``counters`` so the kernels can update t
 its slots are the ``C_*`` constants below.
 """
 
-import math
 from typing import NamedTuple, Sequence
 
 import numpy as np
@@ -149,11 +148,3 @@ class PartState:
         n = self.n
         return PartsView(self.ids[:n], self.part_type[:n], self.x[:n], self.y[:n],
                          self.yaw[:n], self.vx[:n], self.vy[:n], self.wz[:n])
-
-
-def wrap_angle(angle: float) -> float:
-    """Return ``angle`` wrapped into (-pi, pi] [rad]."""
-    a = math.fmod(angle + math.pi, 2.0 * math.pi)
-    if a <= 0.0:
-        a += 2.0 * math.pi
-    return a - math.pi

@@ -13,20 +13,22 @@ that keeps data beyond :meth:`on_frame <FrameSink.on_frame>` keeps the bytes (im
 :meth:`Frame.copy`, never the frame.
 """
 
-from typing import Iterator, List, Optional, Protocol, Sequence, Tuple
+from typing import Iterator, Protocol, Sequence, Tuple
 
 from conveyor_twin import contract
-from conveyor_twin.contract import Topic
+from conveyor_twin.contract import Shape, Topic
 
-#: The streams of a frame in the order :meth:`Frame.messages` yields them.
-FRAME_STREAMS: Tuple[Topic, ...] = (
-    contract.CLOCK, contract.BELT_STATES, contract.ACTUATOR_STATES, contract.DIAGNOSTICS,
-    contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES, contract.DENSITY,
-    contract.FAULTS)
+#: The streams of a frame in the order :meth:`Frame.messages` yields them
+#: (:data:`conveyor_twin.contract.FRAME`).
+FRAME_STREAMS: Tuple[Topic, ...] = tuple(slot.topic for slot in contract.FRAME)
 
 
 class Frame:
     """The output of one step (attributes are set by the producers, read by the sinks).
+
+    Besides ``step``, ``time_ns``, ``input`` and ``commands``, a frame has one attribute per
+    entry of :data:`conveyor_twin.contract.FRAME` (its ``attribute``), holding that stream's
+    bytes as its ``shape`` says, or its ``empty`` value when the step emitted none of it.
 
     :ivar step: step index (the state after it) [1].
     :ivar time_ns: simulation time of the step [ns]; the stamp of every stream but the edges.
@@ -46,42 +48,33 @@ class Frame:
         else None (coordinator).
     """
 
-    __slots__ = ('step', 'time_ns', 'input', 'commands', 'clock', 'belt_states', 'actuator_states',
-                 'diagnostics', 'parts', 'light_barriers', 'edges', 'density', 'faults')
+    __slots__ = ('step', 'time_ns', 'input', 'commands') + tuple(
+        slot.attribute for slot in contract.FRAME)
 
     def __init__(self) -> None:
         self.step = 0
         self.time_ns = 0
         self.input = None
         self.commands: Sequence = ()
-        self.clock: Optional[bytes] = None
-        self.belt_states: Optional[bytes] = None
-        self.actuator_states: Optional[bytes] = None
-        self.diagnostics: Optional[bytes] = None
-        self.parts: Optional[bytes] = None
-        self.light_barriers: Optional[bytes] = None
-        self.edges: Sequence[Tuple[int, bytes]] = ()
-        self.density: List[bytes] = []
-        self.faults: Optional[bytes] = None
+        for slot in contract.FRAME:
+            setattr(self, slot.attribute, slot.empty)
 
     def messages(self) -> Iterator[Tuple[Topic, int, bytes]]:
         """Yield (contract topic, stamp [ns], CDR bytes) of every message of the frame, in the
         order of :data:`FRAME_STREAMS` (edges and density zones in their order)."""
         t = self.time_ns
-        for topic, data in ((contract.CLOCK, self.clock),
-                            (contract.BELT_STATES, self.belt_states),
-                            (contract.ACTUATOR_STATES, self.actuator_states),
-                            (contract.DIAGNOSTICS, self.diagnostics),
-                            (contract.PARTS, self.parts),
-                            (contract.LIGHT_BARRIERS, self.light_barriers)):
-            if data is not None:
-                yield topic, t, data
-        for stamp, data in self.edges:
-            yield contract.LIGHT_BARRIER_EDGES, stamp, data
-        for data in self.density:
-            yield contract.DENSITY, t, data
-        if self.faults is not None:
-            yield contract.FAULTS, t, self.faults
+        for slot in contract.FRAME:
+            value = getattr(self, slot.attribute)
+            shape = slot.shape
+            if shape is Shape.ONE:
+                if value is not None:
+                    yield slot.topic, t, value
+            elif shape is Shape.STAMPED:
+                for stamp, data in value:
+                    yield slot.topic, stamp, data
+            else:
+                for data in value:
+                    yield slot.topic, t, data
 
     def copy(self) -> 'Frame':
         """Return a frame with the same bytes that the next step does not overwrite."""
@@ -89,9 +82,12 @@ class Frame:
         for name in self.__slots__:
             setattr(other, name, getattr(self, name))
         other.commands = tuple(self.commands)
-        other.edges = tuple(self.edges)
-        other.density = list(self.density)
+        for slot in _SEQUENCES:
+            setattr(other, slot.attribute, tuple(getattr(self, slot.attribute)))
         return other
+
+
+_SEQUENCES = tuple(slot for slot in contract.FRAME if slot.shape is not Shape.ONE)
 
 
 class FrameSink(Protocol):

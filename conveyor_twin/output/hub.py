@@ -11,7 +11,7 @@ re-simulation, a viewer or a test harness; none of them is known to the cores.
 import threading
 from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 
-from conveyor_twin.contract import Topic
+from conveyor_twin.contract import FRAME, Topic
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.health import Health
 from conveyor_twin.output.frame import Frame, FrameSink
@@ -19,10 +19,7 @@ from conveyor_twin.output.producers import FrameProducer
 
 
 #: Frame attribute of every stream a ``stream_outage`` may silence, and its value when silent.
-_OUTAGE = {'parts': ('parts', None), 'density': ('density', ()),
-           'light_barriers': ('light_barriers', None), 'light_barrier_edges': ('edges', ()),
-           'belt_states': ('belt_states', None), 'actuator_states': ('actuator_states', None),
-           '/clock': ('clock', None), 'diagnostics': ('diagnostics', None)}
+_OUTAGE = {slot.topic.name: (slot.attribute, slot.empty) for slot in FRAME if slot.outage}
 
 
 class TwinOutput:

@@ -17,7 +17,7 @@ from typing import List, Sequence, Tuple
 import numpy as np
 
 from conveyor_twin.cell.model import Cell
-from conveyor_twin.wire.cdr import _Builder, _string_bytes, ENCAPSULATION_LE, stamp_parts
+from conveyor_twin.wire.builder import CdrBuilder, ENCAPSULATION_LE, stamp_parts, string_bytes
 
 CUBE, SPHERE, CYLINDER, LINE_STRIP, LINE_LIST, CUBE_LIST, SPHERE_LIST = 1, 2, 3, 4, 5, 6, 7
 _F32x4 = struct.Struct('<4f')
@@ -48,7 +48,7 @@ class _Marker:
         self.points = np.zeros((0, 3)) if points is None else points
 
 
-def _write_marker(b: _Builder, m: _Marker, stamp_ns: int, frame_id: str) -> None:
+def _write_marker(b: CdrBuilder, m: _Marker, stamp_ns: int, frame_id: str) -> None:
     b.stamp(stamp_ns)
     b.string(frame_id)
     b.string(m.ns)
@@ -85,7 +85,7 @@ def _write_marker(b: _Builder, m: _Marker, stamp_ns: int, frame_id: str) -> None
 def _marker_tail() -> bytes:
     """Return the fields after ``points`` (all empty), written from a 4-aligned offset (where
     the points always end: 24-byte points after 8-alignment, or the count alone)."""
-    b = _Builder()
+    b = CdrBuilder()
     b.u32(0)                  # colors
     b.string('')              # texture_resource
     b.stamp(0)                # texture.header
@@ -115,7 +115,7 @@ def _append_marker(buf: bytearray, m: _Marker, stamp: bytes, frame_body: bytes) 
     buf += stamp
     buf += frame_body
     buf += _ZEROS[-len(buf) & 3]
-    buf += _string_bytes(m.ns)
+    buf += string_bytes(m.ns)
     buf += _ZEROS[-len(buf) & 3]
     buf += _IDS.pack(m.id, m.type, 0)
     buf += _ZEROS[-len(buf) & 7]
@@ -134,18 +134,9 @@ def _append_marker(buf: bytearray, m: _Marker, stamp: bytes, frame_body: bytes) 
     buf += _TAIL
 
 
-def encode_marker_array(markers: Sequence[_Marker], stamp_ns: int, frame_id: str) -> bytes:
-    """Return the CDR bytes of a MarkerArray holding ``markers``."""
-    b = _Builder()
-    b.u32(len(markers))
-    for marker in markers:
-        _write_marker(b, marker, stamp_ns, frame_id)
-    return b.message()
-
-
 def _static_prefix(markers: Sequence[_Marker], frame_id: str) -> bytes:
     """Return the payload of a MarkerArray's first markers, stamped 0 ("latest")."""
-    b = _Builder()
+    b = CdrBuilder()
     b.u32(len(markers))
     for marker in markers:
         _write_marker(b, marker, 0, frame_id)
@@ -184,7 +175,7 @@ class CellMarkers:
         # fixed geometry is stamped 0 ("use the latest transform") and encoded once
         self._static_count = len(static)
         self._static = _static_prefix(static, self.frame_id)
-        self._frame_body = _string_bytes(self.frame_id)
+        self._frame_body = string_bytes(self.frame_id)
         self._beams = [_polyline_points([barrier.start, barrier.end], barrier.height)
                        for barrier in cell.light_barriers]
 

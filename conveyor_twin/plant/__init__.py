@@ -6,5 +6,7 @@
 conservative synchronisation rule, :mod:`~conveyor_twin.plant.cell` one cell of the plant,
 :mod:`~conveyor_twin.plant.ledger` the plant-wide part ledger,
 :mod:`~conveyor_twin.plant.runner` all cells stepped in one process,
+:mod:`~conveyor_twin.plant.stepping` a cell or the whole plant as the stepping loop
+(:class:`~conveyor_twin.coord.runner.Runner`) steps it,
 :mod:`~conveyor_twin.plant.supervisor` one process per cell, watched and restarted on request.
 """

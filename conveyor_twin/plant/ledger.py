@@ -11,9 +11,6 @@ batches) and says by how much it does not.
 from dataclasses import dataclass, field
 from typing import Dict, List, Mapping, Sequence
 
-#: The per-cell counts a ledger is built from (see ``PlantCellCore.counts``).
-CELL_KEYS = ('entered', 'in_cell', 'left', 'vanished', 'sent', 'inserted')
-
 
 @dataclass
 class CellReport:
@@ -129,12 +126,6 @@ class PlantLedger:
             lines.append(f'  link {name}: sent {k.sent}, inserted {k.inserted}, held '
                          f'{k.held} (waiting at the entry {k.waiting}){extra}')
         return '\n'.join(lines)
-
-
-def ledger_from(cells: Mapping[str, Mapping[str, float]],
-                links: Mapping[str, LinkCounts], lost: float = 0.0) -> PlantLedger:
-    """Build a ledger from per-cell counts and per-link counts."""
-    return PlantLedger({k: dict(v) for k, v in cells.items()}, dict(links), lost)
 
 
 def ledger_of(reports: Mapping[str, CellReport],

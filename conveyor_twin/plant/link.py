@@ -146,11 +146,6 @@ class LinkExit:
         self._outgoing = list(self.held)
         self._first_unsent = self.held[0].seq if self.held else self.sent
 
-    @property
-    def has_outgoing(self) -> bool:
-        """True if parts wait to be sent."""
-        return bool(self._outgoing)
-
     def receive(self, batch: Acceptances) -> None:
         """Take the entry's report: drop the parts it inserted, learn its progress.
 
@@ -300,8 +295,3 @@ class LinkEntry:
                           final=self.finished)
         self._seq, self._step = [], []
         return out
-
-    @property
-    def has_outgoing(self) -> bool:
-        """True if insertions wait to be reported."""
-        return bool(self._seq)

@@ -24,7 +24,7 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 import yaml
 
 from conveyor_twin.cell.errors import CellError
-from conveyor_twin.cell.loader import _Reader, load_cell
+from conveyor_twin.cell.loader import KeyReader, load_cell
 from conveyor_twin.cell.model import Cell, ZonePolicy
 from conveyor_twin.plant.errors import PlantError
 from conveyor_twin.plant.geometry import end_frame, end_rect
@@ -38,7 +38,7 @@ _NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*\Z')
 _NAME_EXPECTED = 'a name of letters, digits and _ starting with a letter (a ROS name token)'
 
 
-class _PlantReader(_Reader):
+class _PlantReader(KeyReader):
     """The cell loader's key reader, raising :class:`PlantError`."""
 
     def __init__(self, file: str, path: str, data: Any) -> None:

@@ -19,7 +19,7 @@ from typing import Any, Dict, Iterable, Iterator, List, NamedTuple, Optional
 
 from mcap.reader import make_reader
 
-from . import _scan
+from . import scan
 from ._mcapfile import MAGIC, McapFile
 from .errors import RecordingError
 from .qos import STREAM_QOS
@@ -96,8 +96,8 @@ def read_messages(path: str, *, topics: Optional[Iterable[str]] = None,
 
 
 def _read_linear(path: str, wanted: Optional[frozenset]) -> Iterator[RecordedMessage]:
-    report = _scan.ScanReport(path, 0)
-    for m in _scan.iter_scan(path, report):
+    report = scan.ScanReport(path, 0)
+    for m in scan.iter_scan(path, report):
         channel = report.channels.get(m.channel_id)
         if channel is None or (wanted is not None and channel.topic not in wanted):
             continue
@@ -113,7 +113,7 @@ def read_metadata(path: str) -> Dict[str, Dict[str, str]]:
 
     :raises RecordingError: if the file cannot be read or is not MCAP.
     """
-    return {name: data for name, data in _scan.scan(path).metadata}
+    return {name: data for name, data in scan.scan(path).metadata}
 
 
 def read_attachment(path: str, name: str) -> bytes:
@@ -121,7 +121,7 @@ def read_attachment(path: str, name: str) -> bytes:
 
     :raises RecordingError: if there is no such attachment or the file cannot be read.
     """
-    for attachment_name, _, data in _scan.scan(path).attachments:
+    for attachment_name, _, data in scan.scan(path).attachments:
         if attachment_name == name:
             return data
     raise RecordingError(f'{path} has no attachment {name!r}')
@@ -145,12 +145,12 @@ def info(path: str) -> Dict[str, Any]:
     first: Dict[int, int] = {}
     last: Dict[int, int] = {}
 
-    def count(m: _scan.ScanMessage) -> None:
+    def count(m: scan.ScanMessage) -> None:
         counts[m.channel_id] = counts.get(m.channel_id, 0) + 1
         first.setdefault(m.channel_id, m.log_time)
         last[m.channel_id] = max(last.get(m.channel_id, m.log_time), m.log_time)
 
-    report = _scan.scan(path, count)
+    report = scan.scan(path, count)
     topics = {}
     for cid, ch in sorted(report.channels.items()):
         n = counts.get(cid, 0)
@@ -222,7 +222,7 @@ def recover(src: str, dst: str, *, compression: str = 'lz4') -> RecoveryReport:
     """
     if os.path.abspath(src) == os.path.abspath(dst):
         raise RecordingError(f'recover would overwrite its source {src}')
-    report = _scan.ScanReport(src, 0)
+    report = scan.ScanReport(src, 0)
     result = RecoveryReport(src, dst, False)
     channel_map: Dict[int, int] = {}
     schema_map: Dict[int, int] = {}
@@ -235,7 +235,7 @@ def recover(src: str, dst: str, *, compression: str = 'lz4') -> RecoveryReport:
     with stream:
         out = McapFile(stream, profile='ros2', library=LIBRARY, compression=comp,
                        chunk_size=768 * 1024)
-        for m in _scan.iter_scan(src, report):
+        for m in scan.iter_scan(src, report):
             cid = channel_map.get(m.channel_id)
             if cid is None:
                 channel = report.channels.get(m.channel_id)

@@ -31,7 +31,7 @@ import math
 from typing import Any, Deque, Dict, List, Optional, Tuple
 
 from conveyor_twin.cell import CellError, load_cell_text
-from conveyor_twin.contract import STREAMS
+from conveyor_twin.contract import DIAGNOSTICS, FAULTS, MARKERS, STREAMS
 from conveyor_twin.coord.commands import CommandRejected
 from conveyor_twin.coord.assembly import build_twin
 from conveyor_twin.output.hub import TwinOutput
@@ -46,11 +46,11 @@ from conveyor_twin.record.topics import resolve
 from conveyor_twin.record.writer import (ACCEPTED_ACTUATOR_COMMANDS, ACCEPTED_BELT_COMMANDS,
                                          ACCEPTED_RESETS, ACCEPTED_SPAWNS)
 from conveyor_twin.wire import cdr
-from conveyor_twin.wire.fault_state import decode_fault_state
+from conveyor_twin.wire.decoders import decode_fault_state
 from conveyor_twin.wire.schemas import SCHEMAS
 
 #: Topics never compared (by contract name): their content depends on the wall clock.
-NOT_COMPARED = ('diagnostics',)
+NOT_COMPARED = (DIAGNOSTICS.name,)
 
 
 @dataclass
@@ -254,7 +254,7 @@ def _schedule_faults(path: str, twin: Any, cell: Any, namespace: str, step_ns: i
                      report: ResimReport) -> bool:
     """Schedule the faults the recording's ``faults`` stream shows injected and cleared, at
     their steps with their ids; return False if the stream was not recorded."""
-    topic = resolve('faults', namespace)
+    topic = resolve(FAULTS.name, namespace)
     known: Dict[int, Any] = {}
     seen = False
     for m in reader.read_messages(path, topics=[topic], linear=True):
@@ -382,7 +382,7 @@ def _compare(path: str, rerun: _Rerun, namespace: str, step_ns: int, report: Res
         if m.topic not in specs:
             raise RecordingError(f'{path}: topic {m.topic} is not published by the twin '
                                  f'(namespace {namespace!r})')
-        if specs[m.topic].name == 'markers':
+        if specs[m.topic] is MARKERS:
             if not _compare_marker(m, markers, core, step_ns, report, specs):
                 return
             continue

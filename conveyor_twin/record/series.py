@@ -12,8 +12,6 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from conveyor_twin.record import reader
-from conveyor_twin.record.decode import (decode_actuator_states, decode_belt_states,
-                                         decode_light_barrier_edge)
 from conveyor_twin.wire import cdr
 
 _MSGS = 'conveyor_twin_msgs/msg/'
@@ -130,7 +128,7 @@ def load(path: str, *, part_stride: int = 1,
             parts_x.append(p.x)
             parts_y.append(p.y)
         elif kind == DENSITY and targets:
-            zone = _density_zone(m.data)
+            zone = cdr.density_zone(m.data)
             for target in targets:
                 best = nearest.get((target, zone))
                 if best is None or abs(t - target) < best[0]:
@@ -143,13 +141,13 @@ def load(path: str, *, part_stride: int = 1,
                 bar_t.append(t)
                 bar_b.append(blocked)
         elif kind == EDGES:
-            e = decode_light_barrier_edge(m.data)
+            e = cdr.decode_light_barrier_edge(m.data)
             edges.append((e.stamp_ns * _NS, e.name, e.blocked))
         elif kind == BELTS:
-            b = decode_belt_states(m.data)
+            b = cdr.decode_belt_states(m.data)
             belts.add(t, b.names, b.commanded, b.actual)
         elif kind == ACTUATORS:
-            a = decode_actuator_states(m.data)
+            a = cdr.decode_actuator_states(m.data)
             actuators.add(t, a.names, a.commanded, a.actual)
     if parts_t:
         out.parts = PartSamples(np.concatenate(parts_t), np.concatenate(parts_id),
@@ -163,15 +161,6 @@ def load(path: str, *, part_stride: int = 1,
     out.belts = belts.series()
     out.actuators = actuators.series()
     return out
-
-
-def _density_zone(data: bytes) -> str:
-    """Return the zone name of a DensityGrid without decoding its grid."""
-    r = cdr._Reader(data, 'DensityGrid')
-    r.stamp_ns()
-    r.string()
-    r.scalar('Q')
-    return r.string()
 
 
 def pick_parts(parts: PartSamples, count: int) -> np.ndarray:

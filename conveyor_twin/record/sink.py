@@ -10,10 +10,12 @@ disk. Accepted commands are recorded with the step at which they took effect; ac
 What is recorded is byte for byte what the nodes publish: both take the same frame.
 """
 
+from operator import attrgetter
 from typing import Dict, Sequence
 
 from conveyor_twin import contract
-from conveyor_twin.coord.commands import BELT, Command
+from conveyor_twin.contract import Shape
+from conveyor_twin.coord.commands import Command, CommandKind
 from conveyor_twin.output.frame import Frame
 from conveyor_twin.record.topics import resolve
 from conveyor_twin.record.writer import McapRecorder
@@ -23,7 +25,7 @@ from conveyor_twin.wire import cdr
 def encode_command(command: Command) -> bytes:
     """Return the BeltCommand/ActuatorCommand CDR of an accepted command, with the sender and
     sequence number it arrived with."""
-    if command.kind == BELT:
+    if command.kind == CommandKind.BELT:
         return cdr.encode_belt_command(command.name, command.value, command.sender,
                                        command.sequence)
     return cdr.encode_actuator_command(command.name, command.value, command.sender,
@@ -48,33 +50,29 @@ class RecordingSink:
             recorder.add_topic(name, topic.type_name, qos=topic.qos)
             self.topics[name] = topic
             self._name[topic] = name
-        names = self._name
-        self._clock = names.get(contract.CLOCK)
-        self._belts = names.get(contract.BELT_STATES)
-        self._actuators = names.get(contract.ACTUATOR_STATES)
-        self._diagnostics = names.get(contract.DIAGNOSTICS)
-        self._parts = names.get(contract.PARTS)
-        self._barriers = names.get(contract.LIGHT_BARRIERS)
-        self._edges = names.get(contract.LIGHT_BARRIER_EDGES)
-        self._density = names.get(contract.DENSITY)
-        self._faults = names.get(contract.FAULTS)
+        # (recorded name, frame attribute getter) of every declared frame stream, by shape;
+        # the frame table lists the one-message streams first, so this is its order
+        slots = [(self._name[s.topic], attrgetter(s.attribute), s.shape)
+                 for s in contract.FRAME if s.topic in self._name]
+        self._one = tuple((n, get) for n, get, shape in slots if shape is Shape.ONE)
+        self._stamped = tuple((n, get) for n, get, shape in slots if shape is Shape.STAMPED)
+        self._many = tuple((n, get) for n, get, shape in slots if shape is Shape.MANY)
 
     def on_frame(self, frame: Frame) -> None:
-        """Queue every message of the frame with its stamp, then its accepted commands."""
+        """Queue every message of the frame with its stamp (in the order of
+        :data:`conveyor_twin.contract.FRAME`), then its accepted commands."""
         record = self.recorder.record
         t = frame.time_ns
-        for name, data in ((self._clock, frame.clock), (self._belts, frame.belt_states),
-                           (self._actuators, frame.actuator_states),
-                           (self._diagnostics, frame.diagnostics), (self._parts, frame.parts),
-                           (self._barriers, frame.light_barriers), (self._faults, frame.faults)):
-            if data is not None and name is not None:
+        for name, get in self._one:
+            data = get(frame)
+            if data is not None:
                 record(name, t, data)
-        if self._edges is not None:
-            for stamp, data in frame.edges:
-                record(self._edges, stamp, data)
-        if self._density is not None:
-            for data in frame.density:
-                record(self._density, t, data)
+        for name, get in self._stamped:
+            for stamp, data in get(frame):
+                record(name, stamp, data)
+        for name, get in self._many:
+            for data in get(frame):
+                record(name, t, data)
         for command in frame.commands:
             self.recorder.record_accepted_command(command.kind, t, encode_command(command))
 

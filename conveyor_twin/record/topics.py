@@ -14,29 +14,16 @@ carry no time.
 import struct
 from typing import Dict, Iterable, List, Optional
 
-from conveyor_twin.contract import OfferedQos, Stamp, Topic, TOPICS
-from . import qos as qos_mod
+from conveyor_twin.contract import CLOCK, MARKERS, Stamp, Topic, TOPICS
 
-__all__ = ['CLOCK', 'CONTRACT_TOPICS', 'HEADER', 'NONE', 'OfferedQos', 'STAMP_BY_TYPE',
-           'TopicSpec', 'qos_mod', 'relative', 'resolve', 'select', 'spec_of', 'stamp_ns']
-
-#: ``header.stamp`` (or a Clock's time) at the payload start: the stamp is the first field.
-HEADER = Stamp.HEADER
-CLOCK = Stamp.CLOCK
-NONE = Stamp.NONE
+__all__ = ['STAMP_BY_TYPE', 'relative', 'resolve', 'select', 'spec_of', 'stamp_ns']
 
 _STAMP_LE = struct.Struct('<iI')
 _STAMP_BE = struct.Struct('>iI')
 NS_PER_S = 1_000_000_000
 
-#: One topic of the contract (:class:`conveyor_twin.contract.Topic`).
-TopicSpec = Topic
-#: The contract topics (streams and commands) by relative name.
-CONTRACT_TOPICS: Dict[str, Topic] = TOPICS
-
 #: Stamp location by type, for topics known only by their type (recorded or discovered).
-STAMP_BY_TYPE: Dict[str, Stamp] = {spec.type_name: spec.stamp
-                                   for spec in CONTRACT_TOPICS.values()}
+STAMP_BY_TYPE: Dict[str, Stamp] = {spec.type_name: spec.stamp for spec in TOPICS.values()}
 
 
 def resolve(name: str, namespace: str = '') -> str:
@@ -59,18 +46,18 @@ def relative(topic: str, namespace: str = '') -> str:
     A topic outside the namespace (or ``/clock``) is returned unchanged.
     """
     ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
-    if topic != '/clock' and topic.startswith(ns + '/'):
+    if topic != CLOCK.name and topic.startswith(ns + '/'):
         return topic[len(ns) + 1:]
     return topic
 
 
-def spec_of(topic: str, namespace: str = '') -> Optional[TopicSpec]:
+def spec_of(topic: str, namespace: str = '') -> Optional[Topic]:
     """Return the contract entry of an absolute topic in a namespace (None if not contract)."""
-    return CONTRACT_TOPICS.get(relative(topic, namespace))
+    return TOPICS.get(relative(topic, namespace))
 
 
 def select(names: Optional[Iterable[str]] = None, *,
-           markers: bool = False) -> List[TopicSpec]:
+           markers: bool = False) -> List[Topic]:
     """Return the contract entries to record.
 
     :param names: relative names (``/clock`` absolute) to pick; None: every default topic.
@@ -78,15 +65,14 @@ def select(names: Optional[Iterable[str]] = None, *,
     :raises KeyError: for a name that is not a contract topic (the message lists them).
     """
     if names is None:
-        return [s for s in CONTRACT_TOPICS.values() if s.default or (markers and
-                                                                      s.name == 'markers')]
+        return [s for s in TOPICS.values() if s.default or (markers and s is MARKERS)]
     chosen = []
     for name in names:
-        spec = CONTRACT_TOPICS.get(name) or CONTRACT_TOPICS.get(name.lstrip('/'))
-        if spec is None and name.lstrip('/') == 'clock':
-            spec = CONTRACT_TOPICS['/clock']
+        spec = TOPICS.get(name) or TOPICS.get(name.lstrip('/'))
+        if spec is None and name.lstrip('/') == CLOCK.name.lstrip('/'):
+            spec = CLOCK
         if spec is None:
-            msg = f'{name!r} is not a contract topic; expected one of {", ".join(CONTRACT_TOPICS)}'
+            msg = f'{name!r} is not a contract topic; expected one of {", ".join(TOPICS)}'
             raise KeyError(msg)
         if spec not in chosen:
             chosen.append(spec)
@@ -96,8 +82,8 @@ def select(names: Optional[Iterable[str]] = None, *,
 def stamp_ns(stamp: str, data: bytes) -> Optional[int]:
     """Return the simulation time carried by a CDR message, or None if it carries none.
 
-    :param stamp: :data:`HEADER` or :data:`CLOCK` (the time is the first field of the payload)
-        or :data:`NONE`.
+    :param stamp: :attr:`Stamp.HEADER <conveyor_twin.contract.Stamp.HEADER>` or
+        ``Stamp.CLOCK`` (the time is the first field of the payload) or ``Stamp.NONE``.
     :param data: serialized message, with its 4-byte encapsulation header.
     :return: time [ns], or None (no stamp, too short, or an encapsulation other than CDR).
     """

@@ -46,6 +46,7 @@ from . import qos as qos_mod
 from ._mcapfile import McapFile
 from .errors import RecordingError
 from .. import __version__
+from ..cell.model import Mode
 from ..health import Health
 from ..wire.schemas import SCHEMAS
 from ..wire.typehash import type_hash
@@ -82,7 +83,6 @@ ROS_DISTRO = 'kilted'
 WRITER_NAME = 'recorder writer'
 LIBRARY = f'conveyor_twin/{__version__} (conveyor_twin.record, rosbag2 MCAP layout)'
 
-_COMPRESSIONS = {'lz4': 'lz4', 'zstd': 'zstd', 'none': '', '': ''}
 _REGISTER = -1
 
 
@@ -136,10 +136,23 @@ class _Topic:
         self.channel_id = 0
 
 
+class Compression(Mode):
+    """Chunk compression of a recording (a ``str`` Enum: members equal the option strings)."""
+
+    LZ4 = 'lz4'
+    ZSTD = 'zstd'
+    NONE = 'none'
+
+    @property
+    def chunk_name(self) -> str:
+        """The compression field of the MCAP chunks (``''`` for none)."""
+        return '' if self is Compression.NONE else self.value
+
+
 class McapRecorder:
     """Record CDR messages into a rosbag2-compatible MCAP file from a background thread."""
 
-    def __init__(self, path: str, *, compression: str = 'lz4',
+    def __init__(self, path: str, *, compression: str = Compression.LZ4,
                  chunk_size: int = DEFAULT_CHUNK_SIZE,
                  flush_period: Optional[float] = DEFAULT_FLUSH_PERIOD,
                  flush_sim_period_ns: Optional[int] = None,
@@ -172,16 +185,18 @@ class McapRecorder:
             which prints the report. :meth:`close` raises it too.
         :raises RecordingError: if the file cannot be created or an option is invalid.
         """
-        if compression not in _COMPRESSIONS:
+        try:
+            chosen = Compression('none' if compression == '' else compression)
+        except ValueError:
             raise RecordingError(f'unknown compression {compression!r}: expected lz4, zstd '
-                                 'or none')
+                                 'or none') from None
         if chunk_size <= 0 or queue_size <= 0:
             raise RecordingError(f'chunk_size ({chunk_size}) and queue_size ({queue_size}) '
                                  'must be positive')
         if flush_period is not None and flush_period <= 0:
             raise RecordingError(f'flush_period must be positive, not {flush_period}')
         self.path = os.fspath(path)
-        self.compression = compression if compression != '' else 'none'
+        self.compression = chosen
         self._flush_period = flush_period
         self._flush_sim = flush_sim_period_ns
         self._flush_spacing = flush_period * WRITER_FLUSH_SHARE if flush_period else 0.0
@@ -224,7 +239,7 @@ class McapRecorder:
             raise RecordingError(f'cannot create recording {self.path}: {err}') from None
         try:  # the header, metadata and cell: a full disk shows here, before any step
             self._file = McapFile(self._stream, profile='ros2', library=LIBRARY,
-                                  compression=_COMPRESSIONS[compression], chunk_size=chunk_size)
+                                  compression=chosen.chunk_name, chunk_size=chunk_size)
             self._file.add_metadata('conveyor_twin', self._info)
             if cell_yaml is not None:
                 self._file.add_attachment('cell.yaml', 'application/yaml', cell_yaml.encode())

@@ -58,7 +58,7 @@ class ComposedTwin:
         self.cell = cell
         self.context = context
         self._foreign_threads = thread_ids()  # those this twin does not start
-        self.assembled = build_twin(cell, seed=seed, layout='composed')
+        self.assembled = build_twin(cell, seed=seed)
         self.micro_stage = self.assembled.micro
         self.macro_stage = self.assembled.macro
         self.twin = self.assembled.twin
@@ -86,6 +86,7 @@ class ComposedTwin:
                       output=self.output, health=self.health)
         self.coordinator = CoordinatorNode(self.twin, self.runner, context=context,
                                            namespace=namespace, spawn=self.assembled.spawn,
+                                           holds_part=self.assembled.holds_part,
                                            counters=self.counters,
                                            parameter_overrides=overrides, output=self.output)
         self.micro_node = MicroNode(self.micro_stage, **common)

@@ -1,13 +1,11 @@
 """``scale_coordinator``: owns time, takes commands and services, publishes clock and states.
 
 Composed (``conveyor-twin run``), the scale stages live in the same process and are stepped
-in memory; split (its own process), every step's input goes to the ``micro_simulator`` and
-``macro_simulator`` processes over hidden coupling topics and the coordinator waits for both to
-report the step done before the next one, so both layouts produce the same bytes.
+in memory; split (its own process), the twin's one stage is the scale processes
+(:class:`~conveyor_twin.split.remote.RemoteStage`), so both layouts produce the same bytes. The
+node itself never knows which: it takes the spawn, part check and counters of its layout.
 """
 
-import json
-import threading
 import time
 from typing import Any, Callable, Dict, List, Optional
 
@@ -18,44 +16,33 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
-from std_msgs.msg import UInt8MultiArray
 
 from conveyor_twin import contract
-from conveyor_twin.coord import codec
 from conveyor_twin.coord.clock import stamp
 from conveyor_twin.coord.commands import Command, CommandRejected
 from conveyor_twin.coord.requests import (check_reset, check_spawn, RequestRejected,
                                           reset_message, SpawnRequest)
 from conveyor_twin.coord.runner import Runner
-from conveyor_twin.coord.stages import MicroStage
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.coord.twin import Twin
-from conveyor_twin.faults.material import holds_part
 from conveyor_twin.faults.model import ActiveFault, FaultRejected, FaultSpec, no_such_part
-from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Failure, process_alive
+from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Failure
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.producers import CoordinatorOutput
-from conveyor_twin.ros import coupling
 from conveyor_twin.ros.endpoints import create_publisher, create_service, create_subscription
 from conveyor_twin.ros.params import declare_twin_parameters
-from conveyor_twin.ros.qos import COUPLING_QOS, publish_failures
+from conveyor_twin.ros.qos import publish_failures
 from conveyor_twin.ros.stream_publisher import StreamPublisher
 from conveyor_twin.wire.diagnostics import encode_diagnostic_array, ERROR, OK, Status, WARN
 
 #: The streams this node publishes from the frames.
-STREAMS = (contract.CLOCK, contract.BELT_STATES, contract.ACTUATOR_STATES, contract.DIAGNOSTICS,
-           contract.FAULTS)
+STREAMS = contract.frame_streams(contract.Producer.COORDINATOR)
 
-REMOTE_STEP_TIMEOUT = 10.0        # s a split scale node may take to report a step done
-COUNTERS_TIMEOUT = 2.0            # s the split scale nodes may take to send their counters
 LOG_THROTTLE = 1.0                # s between two logged rejections
-LIVENESS_PERIOD = 0.25            # s between checks that a silent scale node's process lives
 FINAL_DIAGNOSTICS_ACK = 2.0       # s the diagnostics after a failure may wait to be acked
 #: Name of the diagnostics status of the twin's background threads and processes.
 HEALTH_STATUS = 'conveyor_twin: health'
-#: Node name of each split scale role.
-ROLE_NODES = {codec.MICRO_ROLE: 'micro_simulator', codec.MACRO_ROLE: 'macro_simulator'}
 
 
 class CoordinatorNode(Node):
@@ -63,30 +50,33 @@ class CoordinatorNode(Node):
 
     :param twin: the coordinator core.
     :param runner: the stepping thread (realtime/fast) or the lockstep stepper.
-    :param remote_roles: in the split layout, the roles of the scale nodes to wait for each step.
-    :param spawn: places a checked spawn request's parts now, returning their ids (composed:
-        the assembly's spawn).
+    :param spawn: places a checked spawn request's parts now, returning their ids (the
+        assembly's or the split coordinator role's spawn); raises ValueError if it placed none.
+    :param holds_part: True if the micro scale holds a part of this id now (``part_jam``
+        requests); raises TimeoutError or RuntimeError if it cannot tell.
+    :param refresh: called after the ``step`` service stepped (split layout: fetches the scale
+        nodes' counters of this state, for the summary).
     :param counters: returns part-balance counters for diagnostics and the summary.
     :param output: the twin's output whose frames this node publishes (composed: shared by the
         three nodes, attached to the twin by the assembly); None: the node makes the output of
         the coordinator's streams and attaches it to ``twin`` (split layout).
-    :param scale_pids: split layout: the process id of each scale role, if known (a reply
-        that does not come then says whether that process still lives).
     """
 
     def __init__(self, twin: Twin, runner: Runner, *, context=None,
                  namespace: Optional[str] = None,
-                 remote_roles: tuple = (),
-                 spawn: Optional[Callable[[SpawnRequest], np.ndarray]] = None,
+                 spawn: Callable[[SpawnRequest], np.ndarray],
+                 holds_part: Callable[[int], bool],
                  counters: Optional[Callable[[], Dict[str, float]]] = None,
-                 parameter_overrides=None, output: Optional[TwinOutput] = None,
-                 scale_pids: Optional[Dict[int, int]] = None) -> None:
+                 refresh: Optional[Callable[[], object]] = None,
+                 parameter_overrides=None, output: Optional[TwinOutput] = None) -> None:
         super().__init__('scale_coordinator', context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
         self.twin = twin
         self.runner = runner
         self.parameters = declare_twin_parameters(self, step_s=twin.cell.settings.step)
         self._spawn = spawn
+        self._holds_part = holds_part
+        self._refresh = refresh
         self._counter_sources: List[Callable[[], Dict[str, float]]] = (
             [counters] if counters else [])
         self._last_log = 0.0
@@ -107,33 +97,10 @@ class CoordinatorNode(Node):
         create_service(self, contract.INJECT_FAULT, self._on_inject_fault)
         create_service(self, contract.CLEAR_FAULT, self._on_clear_fault)
         twin.step_listeners.append(self._log_faults)
-        self._remote_roles = tuple(remote_roles)
-        self.scale_pids: Dict[int, int] = dict(scale_pids or {})
         twin.health.listeners.append(self._log_failure)
-        #: The scale nodes send measures for a scenario's triggers with every step reply.
-        self.measures_wanted = False
-        self._measures: Dict[int, bytes] = {}
         #: Called with (kind 'spawn' or 'reset', sim time before it [ns], the request) for every
         #: successful ``spawn_parts``/``reset`` call, under the twin's lock (the recorder).
         self.call_listeners: List[Callable[[str, int, Any], None]] = []
-        self._done: Dict[int, int] = {role: 0 for role in self._remote_roles}  # replies seen
-        self._replies: Dict[int, tuple] = {}  # role -> (step, reply bytes) of the last reply
-        self._step_replies: Dict[int, bytes] = {}  # role -> counters (reply bytes)
-        self._replies_fresh = False  # _step_replies hold counters of the current state
-        self._done_cv = threading.Condition()
-        self._scales_ready = not self._remote_roles
-        self.coupling_node: Optional[Node] = None
-        if self._remote_roles:
-            self.coupling_pub = self.create_publisher(UInt8MultiArray, coupling.COUPLING_TOPIC,
-                                                      COUPLING_QOS)
-            # The replies are served by a node of their own, spun by its own executor thread
-            # (split.coordinator_main): a step/reset/spawn service callback of this node waits
-            # for them, so they cannot share this node's executor.
-            self.coupling_node = Node('_scale_coordinator_coupling', context=context,
-                                      namespace=namespace, start_parameter_services=False)
-            self._done_sub = self.coupling_node.create_subscription(
-                UInt8MultiArray, coupling.DONE_TOPIC, self._on_done, COUPLING_QOS, raw=True)
-            twin.step_listeners.append(self._step_remote)
         if output is None:
             output = TwinOutput([CoordinatorOutput(twin, diagnostics=self.diagnostics_cdr)])
             twin.step_listeners.append(output.on_step)
@@ -235,116 +202,6 @@ class CoordinatorNode(Node):
             self.get_logger().warning(f'fault {verb} at step {event.step}: '
                                       f'{_describe(event.fault)}')
 
-    # -- split layout --------------------------------------------------------------------
-    def _on_done(self, data: bytes) -> None:
-        role, step, reply = codec.parse_done(codec.from_cdr(data))
-        with self._done_cv:
-            if role in self._done:
-                self._done[role] += 1
-                self._replies[role] = (step, reply)
-                self._done_cv.notify_all()
-
-    def _send_and_wait(self, payload: bytes, step: int,
-                       timeout: float = REMOTE_STEP_TIMEOUT) -> Dict[int, bytes]:
-        """Send a coupling payload and wait for every scale node's reply to it [s]."""
-        if not self._scales_ready and not self.wait_for_scales(REMOTE_STEP_TIMEOUT):
-            raise TimeoutError('micro_simulator and macro_simulator are not connected')
-        with self._done_cv:
-            counts = dict(self._done)
-        self.coupling_pub.publish(codec.to_cdr(payload))
-        deadline = time.monotonic() + timeout
-        with self._done_cv:
-            while any(self._done[r] <= counts[r] for r in counts):
-                remaining = deadline - time.monotonic()
-                missing = [r for r in counts if self._done[r] <= counts[r]]
-                if remaining <= 0 or not self.context.ok():
-                    raise TimeoutError(f'{self._describe_silent(missing)} did not answer for '
-                                       f'step {step} within {timeout:g} s')
-                if not self._done_cv.wait(min(remaining, LIVENESS_PERIOD)):
-                    gone = [r for r in missing
-                            if r in self.scale_pids and not process_alive(self.scale_pids[r])]
-                    if gone:  # no use waiting for a process that has ended
-                        raise ScaleNodeLost(f'{self._describe_silent(gone)} did not answer '
-                                            f'for step {step}')
-            wrong = {r: v[0] for r, v in self._replies.items() if v[0] != step}
-            if wrong:
-                raise RuntimeError(f'scale nodes answered for other steps {wrong}, '
-                                   f'expected {step}: the layout lost lockstep')
-            return {r: v[1] for r, v in self._replies.items()}
-
-    def _describe_silent(self, roles: List[int]) -> str:
-        """Name each scale node of ``roles`` and say whether its process lives (by its process
-        id if known, else whether the node is in the ROS graph)."""
-        try:
-            graph = {name for name, _ in self.get_node_names_and_namespaces()}
-        except Exception:  # noqa: BLE001 - a context shutting down has no graph
-            graph = set()
-        out = []
-        for role in roles:
-            name = ROLE_NODES.get(role, f'scale role {role}')
-            pid = self.scale_pids.get(role)
-            if pid is not None:
-                state = ('its process (pid %d) is alive' if process_alive(pid)
-                         else 'its process (pid %d) has exited') % pid
-            else:
-                state = ('its node is in the ROS graph' if name in graph
-                         else 'its node is not in the ROS graph')
-            out.append(f'{name} ({state})')
-        return ', '.join(out)
-
-    def _step_remote(self, inp: StepInput, commands: List[Command]) -> None:
-        replies = self._send_and_wait(codec.step_payload(inp), inp.step)
-        if self.measures_wanted:  # a scenario's triggers: the scale nodes' measures first
-            for role, reply in replies.items():
-                replies[role], self._measures[role] = codec.split_step_reply(reply)
-        # the scale nodes send their counters on diagnostics steps only: keep the last ones
-        self._replies_fresh = all(replies.get(r) for r in self._remote_roles)
-        if self._replies_fresh:
-            self._step_replies = replies
-
-    def measured_edge_count(self) -> np.ndarray:
-        """Every light barrier's reported edge count after the last step, as the micro node
-        measured it (split layout, a scenario with triggers)."""
-        return codec.decode_measures(self._measures[codec.MICRO_ROLE])[0]
-
-    def measured_zone_parts(self, index: int) -> float:
-        """The parts in zone ``index`` after the last step: the micro node's bodies plus the
-        macro node's density [parts] (split layout, a scenario with triggers)."""
-        micro = codec.decode_measures(self._measures[codec.MICRO_ROLE])[1]
-        macro = codec.decode_measures(self._measures[codec.MACRO_ROLE])[1]
-        return float(micro[index]) + float(macro[index])
-
-    def last_replies(self) -> Dict[int, bytes]:
-        """Return each split scale node's counters (reply bytes, by role) for the current state:
-        those of the last step if it carried them, else asked for now (if the nodes do not
-        answer, e.g. stopped by the same Ctrl-C: those of the last diagnostics step)."""
-        with self.twin.lock:
-            if self._replies_fresh or not self._scales_ready:
-                return self._step_replies
-            try:
-                self._step_replies = self._send_and_wait(
-                    codec.COUNTERS, self.twin.step_index, COUNTERS_TIMEOUT)
-            except (TimeoutError, RuntimeError) as exc:  # ScaleNodeLost is a RuntimeError
-                self.get_logger().warning(f'scale node counters unavailable: {exc}')
-                return self._step_replies
-            self._replies_fresh = True
-            return self._step_replies
-
-    def wait_for_scales(self, timeout: float) -> bool:
-        """Wait until every split scale node is connected both ways; return True if so."""
-        if not self._remote_roles:
-            return True
-        deadline = time.monotonic() + timeout
-        n = len(self._remote_roles)
-        while time.monotonic() < deadline:
-            # matched both ways: our writer sees their readers, our reader sees their writers
-            if (self.coupling_pub.get_subscription_count() >= n
-                    and self._done_sub.get_publisher_count() >= n):
-                self._scales_ready = True
-                return True
-            time.sleep(0.01)
-        return False
-
     # -- commands ------------------------------------------------------------------------
     def _counters(self) -> Dict[str, float]:
         out: Dict[str, float] = {}
@@ -389,7 +246,7 @@ class CoordinatorNode(Node):
         except CommandRejected as exc:
             error = exc
             self._rejected(exc)
-        self._report('belt_command', msg, msg.belt, msg.speed, error)
+        self._report(contract.BELT_COMMAND.name, msg, msg.belt, msg.speed, error)
 
     def _on_actuator_command(self, msg: ActuatorCommand) -> None:
         error = None
@@ -399,14 +256,14 @@ class CoordinatorNode(Node):
         except CommandRejected as exc:
             error = exc
             self._rejected(exc)
-        self._report('actuator_command', msg, msg.actuator, msg.position, error)
+        self._report(contract.ACTUATOR_COMMAND.name, msg, msg.actuator, msg.position, error)
 
     # -- services ------------------------------------------------------------------------
     def _on_step(self, request: Step.Request, response: Step.Response) -> Step.Response:
         if self.runner.mode is TimeMode.LOCKSTEP:
             self.runner.step(int(request.steps))
-            if self._remote_roles:
-                self.last_replies()  # the scale nodes' counters of this state, for the summary
+            if self._refresh is not None:
+                self._refresh()
         else:
             self.get_logger().warning(f'step service ignored in {self.runner.mode.value} mode')
         with self.twin.lock:
@@ -423,10 +280,7 @@ class CoordinatorNode(Node):
             return response
         with self.twin.lock:
             before_ns = self.twin.time_ns
-            self.twin.reset(cell, int(request.seed))
-            self._replies_fresh = False
-            if self._remote_roles:
-                self._send_and_wait(codec.reset_payload(request.seed, request.cell_file), 0)
+            self.twin.reset(cell, int(request.seed))  # the stages too (split: remote)
             self.runner.pacer.restart()
             for listener in self.call_listeners:
                 listener('reset', before_ns, request)
@@ -440,11 +294,7 @@ class CoordinatorNode(Node):
             spawn = check_spawn(self.twin.cell, request.part_type, request.x, request.y,
                                 request.yaw)
             with self.twin.lock:
-                if self._remote_roles:
-                    self._replies_fresh = False
-                    ids = self._spawn_remote(spawn)
-                else:
-                    ids = self._spawn(spawn)
+                ids = self._spawn(spawn)
                 for listener in self.call_listeners:
                     listener('spawn', self.twin.time_ns, request)
         except ValueError as exc:  # RequestRejected, or placement refused
@@ -481,17 +331,11 @@ class CoordinatorNode(Node):
         coupling (as for a spawn)."""
         if fault.kind != 'part_jam' or fault.index < 0:
             return
-        if self._remote_roles:
-            try:
-                replies = self._send_and_wait(codec.part_query_payload(fault.index),
-                                              self.twin.step_index)
-            except (TimeoutError, RuntimeError) as exc:
-                raise self.twin.faults.reject(f"fault 'part_jam': the micro node did not say "
-                                              f'whether part {fault.index} exists: {exc}')
-            exists = replies.get(codec.MICRO_ROLE, b'') == b'Y'
-        else:
-            stages = [s for s in self.twin.stages if isinstance(s, MicroStage)]
-            exists = any(holds_part(s.sim, fault.index) for s in stages)
+        try:
+            exists = self._holds_part(fault.index)
+        except (TimeoutError, RuntimeError) as exc:
+            raise self.twin.faults.reject(f"fault 'part_jam': the micro node did not say "
+                                          f'whether part {fault.index} exists: {exc}')
         if not exists:
             raise self.twin.faults.reject(str(no_such_part(fault.index)))
 
@@ -505,11 +349,6 @@ class CoordinatorNode(Node):
         response.success = True
         response.message = f'fault {fault.id} ({fault.kind}) is cleared at the next step'
         return response
-
-    def _spawn_remote(self, spawn: SpawnRequest) -> np.ndarray:
-        payload = codec.spawn_payload(spawn.type_index, spawn.x, spawn.y, spawn.yaw)
-        replies = self._send_and_wait(payload, self.twin.step_index)
-        return codec.parse_spawn_reply(replies.get(codec.MICRO_ROLE, b''))
 
     def publish_failures(self, counters: Dict[str, float]) -> int:
         """Publishes refused by the middleware: this node's and the scale nodes' (counters
@@ -537,17 +376,8 @@ class CoordinatorNode(Node):
         }
 
 
-class ScaleNodeLost(RuntimeError):
-    """A split scale node's process ended while the coordinator waited for its reply."""
-
-
 def _describe(fault: ActiveFault) -> str:
     """Return ``kind target (id N)`` of a fault, with its parameters."""
     params = ', '.join(f'{k}={v:g}' for k, v in fault.params)
     target = f' {fault.target}' if fault.target else ''
     return f'{fault.kind}{target}' + (f' [{params}]' if params else '') + f' (id {fault.id})'
-
-
-def summary_json(node: CoordinatorNode) -> str:
-    """Return :meth:`CoordinatorNode.summary` as one line of JSON."""
-    return json.dumps(node.summary(), sort_keys=True)

@@ -25,7 +25,7 @@ from conveyor_twin_msgs.srv import Reset, SpawnParts, Step
 from rclpy.serialization import deserialize_message, serialize_message
 
 from conveyor_twin import contract
-from conveyor_twin.coord.commands import BELT, CommandRejected, SEQUENCE_MAX
+from conveyor_twin.coord.commands import CommandKind, CommandRejected, SEQUENCE_MAX
 from conveyor_twin.ros.endpoints import create_subscription
 from conveyor_twin.record.topics import resolve
 from conveyor_twin.viz.foxglove_view import (DEFAULT_BACKLOG, DEFAULT_SCENE_RATE,
@@ -40,11 +40,11 @@ _TIME = (f"\n{schemas.SEPARATOR}\nMSG: builtin_interfaces/Time\n"
 FOXGLOVE_SENDER = 'foxglove'
 #: (name, type, request ros2msg text, response ros2msg text) of the services (msg_defs/srv).
 SERVICE_TEXTS = (
-    ('step', 'conveyor_twin_msgs/srv/Step', 'uint32 steps\n',
+    (contract.STEP.name, contract.STEP.type_name, 'uint32 steps\n',
      'uint64 step\nbuiltin_interfaces/Time stamp\n' + _TIME),
-    ('reset', 'conveyor_twin_msgs/srv/Reset', 'string cell_file\nuint64 seed\n',
+    (contract.RESET.name, contract.RESET.type_name, 'string cell_file\nuint64 seed\n',
      'bool success\nstring message\n'),
-    ('spawn_parts', 'conveyor_twin_msgs/srv/SpawnParts',
+    (contract.SPAWN_PARTS.name, contract.SPAWN_PARTS.type_name,
      'string part_type\nfloat64[] x\nfloat64[] y\nfloat64[] yaw\n',
      'bool success\nstring message\nuint32[] id\n'),
 )
@@ -108,8 +108,7 @@ class ScaleStreams:
     stamp of its header, or the latest step's time for ``markers``.
     """
 
-    TOPICS = (contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES,
-              contract.DENSITY, contract.MARKERS)
+    TOPICS = tuple(t for t in contract.STREAMS if t.producer is not contract.Producer.COORDINATOR)
 
     def __init__(self, node: Any, view: FoxgloveView) -> None:
         self.node = node
@@ -149,7 +148,7 @@ def _view(coordinator: Any, twin: Any, cell: Any, **rates: Any) -> FoxgloveView:
     def on_command(kind: str, name: str, value: float) -> Optional[str]:
         sequence = next(numbers) & SEQUENCE_MAX
         try:
-            if kind == BELT:
+            if kind == CommandKind.BELT:
                 twin.commands.submit_belt(name, value, FOXGLOVE_SENDER, sequence)
             else:
                 twin.commands.submit_actuator(name, value, FOXGLOVE_SENDER, sequence)
@@ -158,8 +157,9 @@ def _view(coordinator: Any, twin: Any, cell: Any, **rates: Any) -> FoxgloveView:
             return str(exc)
         return None
 
-    callbacks = {'step': (Step, coordinator._on_step), 'reset': (Reset, coordinator._on_reset),
-                 'spawn_parts': (SpawnParts, coordinator._on_spawn)}
+    callbacks = {contract.STEP.name: (Step, coordinator._on_step),
+                 contract.RESET.name: (Reset, coordinator._on_reset),
+                 contract.SPAWN_PARTS.name: (SpawnParts, coordinator._on_spawn)}
     services = tuple(ServiceSpec(name, type_name, request, response,
                                  _cdr_service(*callbacks[name]))
                      for name, type_name, request, response in SERVICE_TEXTS)

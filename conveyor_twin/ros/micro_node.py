@@ -2,9 +2,10 @@
 
 Composed, its stage is stepped by the coordinator in the same process; as its own process
 (``ros2 run conveyor_twin micro_simulator`` or ``python -m conveyor_twin.ros.micro_node``) it
-follows the coordinator's step inputs over the coupling topic. For a cell with ``macro``/``auto``
-zones it then sends its state after each step to the macro node, which runs the hand-over, and
-replays the returned edits before it publishes (:mod:`conveyor_twin.coord.mirror`).
+serves the split layout's micro role (:class:`~conveyor_twin.split.roles.MicroRole`), which
+follows the coordinator's step inputs over the coupling topic and, for a cell with
+``macro``/``auto`` zones, exchanges the hand-over with the macro node
+(:mod:`conveyor_twin.split.mirror`).
 """
 
 import sys
@@ -13,17 +14,12 @@ from typing import List, Optional
 
 
 from conveyor_twin import contract
-from conveyor_twin.coord import codec
-from conveyor_twin.coord.mirror import MicroSide
+from conveyor_twin.coord.layout import Role
 from conveyor_twin.coord.runner import raise_thread_priority
 from conveyor_twin.coord.stages import MicroStage
-from conveyor_twin.coord.step_input import StepInput
-from conveyor_twin.faults.material import holds_part
 from conveyor_twin.output.frame import Frame
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.markers import CellMarkers
-from conveyor_twin.output.producers import MicroOutput
-from conveyor_twin.ros import coupling
 from conveyor_twin.ros.endpoints import create_publisher
 from conveyor_twin.ros.qos import raw_publish
 from conveyor_twin.ros.scale_node import ScaleNode
@@ -31,7 +27,7 @@ from conveyor_twin.ros.standalone import run_scale_node
 from conveyor_twin.ros.stream_publisher import StreamPublisher
 
 #: The streams this node publishes from the frames (markers it builds itself).
-STREAMS = (contract.PARTS, contract.LIGHT_BARRIERS, contract.LIGHT_BARRIER_EDGES)
+STREAMS = contract.frame_streams(contract.Producer.MICRO)
 #: Name of the markers thread (and of its failure in the twin's health).
 MARKERS_THREAD = 'markers thread'
 
@@ -40,21 +36,17 @@ class MicroNode(ScaleNode):
     """Publish ``parts``, ``light_barriers``, ``light_barrier_edges`` and part ``markers``.
 
     A sink of the twin's frames: it publishes the micro part of every frame of ``output``.
-    Without ``output`` (split layout) the node makes the output of its own stage and builds a
-    frame when its step is done.
 
     :param stage: the micro stage.
-    :param side: split layout, cells with ``macro``/``auto`` zones: the micro half of the
-        hand-over (the assembly's ``micro_side``); the node then exchanges it with the macro
-        node every step.
-    :param output: the twin's output to subscribe to (composed: shared by the three nodes).
+    :param output: the output to subscribe to (composed: shared by the three nodes; split: the
+        micro role's, which builds a frame when its step is done).
+    :param kwargs: as :class:`ScaleNode` (``server``: the split layout's micro role).
     """
 
-    def __init__(self, stage: MicroStage, *, side: Optional[MicroSide] = None,
-                 output: Optional[TwinOutput] = None, **kwargs) -> None:
-        super().__init__('micro_simulator', stage, codec.MICRO_ROLE, **kwargs)
+    def __init__(self, stage: MicroStage, *, output: TwinOutput, **kwargs) -> None:
+        super().__init__('micro_simulator', stage, **kwargs)
         cell = stage.cell
-        self.output = output if output is not None else TwinOutput([MicroOutput(stage)])
+        self.output = output
         self._markers = CellMarkers(cell)
         self.streams = StreamPublisher(self, STREAMS)
         self.parts_pub = self.streams.publishers[contract.PARTS]
@@ -72,34 +64,10 @@ class MicroNode(ScaleNode):
                 target=self.health.guard(MARKERS_THREAD, self._markers_loop),
                 name='conveyor_twin_markers', daemon=True)
             self._markers_thread.start()
-        self._side = side  # the scale hand-over's micro half (split layout, coupled cells)
-        if self.remote and side is not None:
-            self.open_exchange(coupling.MICRO_STATE_TOPIC, coupling.EDITS_TOPIC, self._on_edits)
         self.output.subscribe(self.streams)
         if self.markers_every:
             self.output.subscribe(self)  # on_frame: hands the due markers' state over
         self.serve_coordinator()
-
-    def exchange(self, inp: StepInput) -> None:
-        """Send the step's micro state to the macro node (its edits finish the step)."""
-        self.send_exchange(codec.to_cdr(codec.stamped(inp.step, self._side.state_bytes())))
-
-    def _on_edits(self, data: bytes) -> None:
-        """Replay the macro node's hand-over edits of the pending step, then finish it."""
-        step, body = codec.parse_stamped(codec.from_cdr(data))
-        inp = self._pending
-        if inp is None or step != inp.step:
-            pending = None if inp is None else inp.step
-            self.get_logger().error(f'hand-over edits of step {step} while step {pending} '
-                                    'is pending; ignored')
-            return
-        self._pending = None
-        self._side.apply(body)
-        self.finish_step(inp)
-
-    def publish_step(self, inp: StepInput) -> None:
-        """Split layout: build this process's frame of the step just taken (and publish it)."""
-        self.output.on_step(inp)
 
     def on_frame(self, frame: Frame) -> None:
         """Hand the state of a step due for markers to the markers thread (the frame's
@@ -136,24 +104,11 @@ class MicroNode(ScaleNode):
             self._markers_thread.join(2.0)
         super().destroy_node()
 
-    def spawn_reply(self, body: bytes) -> bytes:
-        """Place parts for a split-layout spawn request: ``E`` + message, or ``I`` + ids."""
-        type_index, x, y, yaw = codec.parse_spawn(body)
-        try:
-            ids = self.stage.spawn(type_index, x, y, yaw)
-        except ValueError as exc:
-            return codec.spawn_error(str(exc))
-        return codec.spawn_reply(ids)
-
-    def part_reply(self, body: bytes) -> bytes:
-        """Answer whether the micro scale holds a part of the queried id now (``part_jam``)."""
-        return codec.part_reply(holds_part(self.stage.sim, codec.parse_part_query(body)))
-
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Run ``micro_simulator`` as its own process, following a split-layout coordinator."""
-    return run_scale_node('micro', lambda a, **kw: MicroNode(
-        a.micro, side=a.micro_side, counters=a.micro_counters, reset=a.reset_scales, **kw), argv)
+    return run_scale_node(Role.MICRO, lambda role, **kw: MicroNode(
+        role.stage, output=role.output, server=role, **kw), argv)
 
 
 if __name__ == '__main__':

@@ -3,10 +3,12 @@
 :class:`PlantCellNode` runs one cell (:class:`~conveyor_twin.plant.cell.PlantCellCore`) in this
 process: with ``streams`` the cell's whole interface (a lockstep
 :class:`~conveyor_twin.ros.compose.ComposedTwin` under the cell's namespace: parts, barriers,
-commands, faults, diagnostics) whose steps the plant drives. A stepping thread computes steps
-as far as the conservative rule allows (:mod:`conveyor_twin.plant.sync`), publishes the links'
-batches every sync period and whenever it has to wait, and waits for the neighbours' batches;
-executor callbacks hand incoming batches to the link ends. After its last step a cell sends
+commands, faults, diagnostics) whose steps the plant drives. A stepping thread meets the
+neighbours, then steps the cell with a :class:`~conveyor_twin.coord.runner.Runner` as far as
+the conservative rule allows (:class:`~conveyor_twin.plant.stepping.CellStepping`: the rule is
+the runner's gate), publishes the links' batches every sync period and whenever it has to
+wait, and waits for the neighbours' batches; executor callbacks hand incoming batches to the
+link ends. After its last step a cell sends
 its entries' final batches and reports ``done`` once every exit heard its entry cell's final
 batch (:meth:`PlantCellNode.settled`): the cells' done reports agree, and the ledger built from
 them balances exactly.
@@ -32,31 +34,25 @@ from rclpy.node import Node
 
 from conveyor_twin import contract
 from conveyor_twin.coord.clock import step_ns
-from conveyor_twin.coord.timing import DeadlinePacer, StepStats, TimeMode
+from conveyor_twin.coord.runner import Runner
+from conveyor_twin.coord.timing import StepStats, TimeMode
 from conveyor_twin.health import Health
 from conveyor_twin.plant.cell import PlantCellCore
 from conveyor_twin.plant.model import Plant
+from conveyor_twin.plant.stepping import CellStepping, sync_period
 from conveyor_twin.ros.compat import make_executor, spin_until
 from conveyor_twin.ros.plant_messages import (CellProgress, PartTransfer, TransferAccepted,
                                               acceptances_msg, acceptances_of, departures_msg,
                                               departures_of, progress_msg)
 from conveyor_twin.ros.qos import to_rclpy
 
-#: Longest wait of a stepping thread for its neighbours before it looks again [s].
+#: Longest wait for the neighbours before and after the stepping before looking again [s].
 WAIT_PERIOD = 0.05
 #: Shortest wall time between two ``progress`` reports of a cell (but the last) [s].
 PROGRESS_PERIOD = 0.2
 #: After its last step, a cell waits for the final batch of each exit's entry cell; an entry
 #: cell with no publisher on the link for this long is gone, and the link keeps its parts [s].
 PEER_GONE_AFTER = 3.0
-
-
-def sync_period(plant: Plant, mode: TimeMode) -> int:
-    """Return the steps between two publications of a cell's batches: a quarter of the
-    shortest link delay (so neighbours rarely wait), 1 in lockstep."""
-    if mode is TimeMode.LOCKSTEP:
-        return 1
-    return max(1, plant.min_delay // 4)
 
 
 def record_cell(composed: Any, plant: Plant, name: str, folder: str, mode: TimeMode) -> Any:
@@ -134,9 +130,18 @@ class PlantCellNode:
         self.core = PlantCellCore(plant, name, run=run, twin=twin,
                                   lockstep=self.mode is TimeMode.LOCKSTEP)
         self.period = sync_period(plant, self.mode)
-        self.stats = StepStats()
-        self.lock = threading.Lock()
-        self._wake = threading.Event()
+        #: The cell as the runner steps it; its lock guards the link ends.
+        self.stepping = CellStepping(self.core, self.health, period=self.period,
+                                     sync=self._flush)
+        #: Steps the cell as the rule allows (realtime: paced, as before, without the
+        #: tuning of a cell twin's stepping thread).
+        self.stepper = Runner(self.stepping, self.mode, max_steps=self.end_step or None,
+                              gate=self.stepping, on_error=self._end,
+                              name=f'plant cell {name!r}: stepping thread')
+        self.stepper.tuned = self.stepper.warm_up = False
+        self.stepper.listeners.append(self.stepping.stepped)
+        self.lock = self.stepping.lock
+        self._wake = self.stepping.wake
         self._stop = threading.Event()
         #: Set once the run completed its end step and its exits settled, or on an error.
         self.done = threading.Event()
@@ -173,7 +178,6 @@ class PlantCellNode:
         self._progress_at = 0.0
         self.executor.add_node(self.node)
         self._threads: List[threading.Thread] = []
-        self.wall_start = self.wall_end = 0.0
         #: Publishes the middleware refused at first (and that were retried).
         self.publish_retries = 0
 
@@ -195,10 +199,20 @@ class PlantCellNode:
         """Report a failure of ``what`` (a thread or a link's callback) to :attr:`health`
         once, and end the run with it (:attr:`error`, :attr:`done`)."""
         self.health.report(f'plant cell {self.name!r}: {what}', exc)
+        self._end(exc)
+
+    def _end(self, exc: BaseException) -> None:
+        """End the run with a failure already reported."""
         if self.error is None:
             self.error = exc
+        self.stepper.request_stop()
         self.done.set()
         self._wake.set()
+
+    @property
+    def stats(self) -> StepStats:
+        """Durations of the cell's steps [s]."""
+        return self.stepper.stats
 
     def _on_progress(self, msg: 'CellProgress') -> None:
         self.reports[msg.cell] = msg
@@ -294,39 +308,14 @@ class PlantCellNode:
             self._wake.wait(WAIT_PERIOD)
             self._wake.clear()
 
-    def _loop(self) -> None:
-        core = self.core
-        pacer = DeadlinePacer(step_ns(self.plant.step))
-        realtime = self.mode is TimeMode.REALTIME
-        end = self.end_step or (1 << 62)
-        since = 0
+    def _run(self) -> None:
+        """The stepping thread: meet the neighbours, step to the end, then settle."""
         try:
             self._meet_neighbours()
-            self.wall_start = time.monotonic()
-            pacer.restart()
-            while not self._stop.is_set() and self.error is None and core.step_index < end:
-                with self.lock:
-                    ready = core.may_step()
-                    if ready:
-                        t0 = time.perf_counter()
-                        core.step()
-                        self.stats.add(time.perf_counter() - t0)
-                if ready:
-                    since += 1
-                    if since >= self.period:
-                        self._flush()
-                        since = 0
-                    if realtime:
-                        pacer.wait_next()
-                    continue
-                self._flush()
-                since = 0
-                self._wake.wait(WAIT_PERIOD)
-                self._wake.clear()
-            self.wall_end = time.monotonic()
+            self.stepper.run()
             if self.error is not None:
                 return
-            if core.step_index >= end:
+            if self.end_step and self.core.step_index >= self.end_step:
                 self._settle()
             else:
                 self._flush()
@@ -335,9 +324,7 @@ class PlantCellNode:
 
     def real_time_factor(self) -> float:
         """Simulated over wall time of the stepping so far."""
-        end = self.wall_end or time.monotonic()
-        wall = end - self.wall_start if self.wall_start else 0.0
-        return self.core.step_index * self.plant.step / wall if wall > 0 else 0.0
+        return self.stepper.real_time_factor()
 
     def all_done(self) -> bool:
         """True once every cell of the plant reported it completed the end step."""
@@ -360,13 +347,14 @@ class PlantCellNode:
                                     name='plant_executor', daemon=True)
             spin.start()
             self._threads.append(spin)
-        stepper = threading.Thread(target=self._loop, name='plant_steps', daemon=True)
+        stepper = threading.Thread(target=self._run, name='plant_steps', daemon=True)
         stepper.start()
         self._threads.append(stepper)
 
     def stop(self) -> None:
         """Stop stepping and serving; destroy the nodes."""
         self._stop.set()
+        self.stepper.request_stop()
         self._wake.set()
         for t in self._threads:
             t.join(5.0)

@@ -90,8 +90,6 @@ def progress_msg(core: PlantCellCore, *, end_step: int, done: bool, stats: StepS
     return m
 
 
-
-
 def report_of(m: 'CellProgress') -> CellReport:
     """Return the plain report of a ``CellProgress`` message (what the ledger needs)."""
     n_entries = len(m.entry_link)

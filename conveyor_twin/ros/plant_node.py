@@ -1,14 +1,16 @@
 """A plant of cells over ROS 2: every cell in one process, and where the other parts live.
 
 :class:`ComposedPlant` runs every cell in this process with
-:class:`~conveyor_twin.plant.runner.PlantRunner` (batches handed over in memory) and publishes
-every cell's ``progress`` as the cells in processes of their own do. A failure of its stepping
-or executor thread is reported once to :attr:`ComposedPlant.health` and ends the run.
+:class:`~conveyor_twin.plant.runner.PlantRunner` (batches handed over in memory), stepped by a
+:class:`~conveyor_twin.coord.runner.Runner` (:class:`~conveyor_twin.plant.stepping.PlantStepping`),
+and publishes every cell's ``progress`` as the cells in processes of their own do. A failure
+of its stepping or executor thread is reported once to :attr:`ComposedPlant.health` and ends
+the run.
 
 The other modules of the plant's ROS layer: :mod:`conveyor_twin.ros.plant_cell_node` (one cell
 per process, coupled over the links' topics), :mod:`conveyor_twin.ros.plant_monitor` (the
 plant-wide ledger and diagnostics) and :mod:`conveyor_twin.ros.plant_messages` (the messages,
-converted from and to the link ends' batches). Their public names are re-exported here.
+converted from and to the link ends' batches).
 """
 
 import threading
@@ -19,25 +21,16 @@ from rclpy.context import Context
 from rclpy.node import Node
 
 from conveyor_twin import contract
-from conveyor_twin.coord.clock import step_ns
-from conveyor_twin.coord.timing import DeadlinePacer, StepStats, TimeMode
+from conveyor_twin.coord.runner import Runner
+from conveyor_twin.coord.timing import StepStats, TimeMode
 from conveyor_twin.health import Health
-from conveyor_twin.plant.ledger import ledger_of
 from conveyor_twin.plant.model import Plant
 from conveyor_twin.plant.runner import PlantRunner
+from conveyor_twin.plant.stepping import PlantStepping, sync_period
 from conveyor_twin.ros.compat import make_executor, spin_until
-from conveyor_twin.ros.plant_cell_node import (PEER_GONE_AFTER, PROGRESS_PERIOD, WAIT_PERIOD,
-                                               PlantCellNode, record_cell, sync_period)
-from conveyor_twin.ros.plant_messages import (CellProgress, PartTransfer, TransferAccepted,
-                                              acceptances_msg, acceptances_of, departures_msg,
-                                              departures_of, progress_msg, report_of)
-from conveyor_twin.ros.plant_monitor import PlantMonitor
+from conveyor_twin.ros.plant_cell_node import PROGRESS_PERIOD, record_cell
+from conveyor_twin.ros.plant_messages import CellProgress, progress_msg
 from conveyor_twin.ros.qos import to_rclpy
-
-__all__ = ['CellProgress', 'ComposedPlant', 'PEER_GONE_AFTER', 'PROGRESS_PERIOD', 'PartTransfer',
-           'PlantCellNode', 'PlantMonitor', 'TransferAccepted', 'WAIT_PERIOD', 'acceptances_msg',
-           'acceptances_of', 'departures_msg', 'departures_of', 'ledger_of', 'progress_msg',
-           'record_cell', 'report_of', 'sync_period']
 
 
 class ComposedPlant:
@@ -70,7 +63,6 @@ class ComposedPlant:
                            for c in plant.cells if record and c.name in self.composed]
         self.runner = PlantRunner(plant, twins=twins)
         self.period = sync_period(plant, self.mode)
-        self.stats = StepStats()
         self.node = Node('plant_composed', namespace='/' + plant.namespace, context=context)
         self._progress_pub = self.node.create_publisher(
             CellProgress, contract.CELL_PROGRESS.name, to_rclpy(contract.CELL_PROGRESS.qos))
@@ -83,8 +75,17 @@ class ComposedPlant:
         #: Where the plant's stepping and executor threads report a failure (each cell's
         #: own threads report to its twin's health: :meth:`failures` has them all).
         self.health = Health()
+        fast = self.mode is TimeMode.FAST
+        #: Steps the plant: in fast mode a sync period at a time, each cell as far ahead as
+        #: the rule allows; else every cell one step per step (realtime: paced, as before,
+        #: without the tuning of a cell twin's stepping thread).
+        self.stepper = Runner(PlantStepping(self.runner, self.health, ahead=fast), self.mode,
+                              max_steps=self.end_step or None,
+                              chunk=self.period if fast else 1, on_error=self._failed,
+                              name='plant stepping thread')
+        self.stepper.tuned = self.stepper.warm_up = False
+        self.stepper.listeners.append(self._report)
         self._threads: List[threading.Thread] = []
-        self.wall_start = self.wall_end = 0.0
 
     def _refuse_step(self, n: int = 1) -> None:
         self.node.get_logger().warning('step service ignored: the plant steps this cell')
@@ -96,36 +97,31 @@ class ComposedPlant:
                                                     stats=self.stats, rtf=rtf,
                                                     with_hash=done))
 
+    @property
+    def stats(self) -> StepStats:
+        """Durations of the plant's steps [s] (in fast mode each sync period's mean)."""
+        return self.stepper.stats
+
     def real_time_factor(self) -> float:
         """Simulated over wall time of the stepping so far."""
-        end = self.wall_end or time.monotonic()
-        wall = end - self.wall_start if self.wall_start else 0.0
-        return self.runner.step_index * self.plant.step / wall if wall > 0 else 0.0
+        return self.stepper.real_time_factor()
 
-    def _loop(self) -> None:
-        runner = self.runner
-        end = self.end_step or (1 << 62)
-        pacer = DeadlinePacer(step_ns(self.plant.step))
-        self.wall_start = time.monotonic()
-        pacer.restart()
+    def _report(self) -> None:
+        """After a step: publish the progress if :data:`PROGRESS_PERIOD` has passed."""
+        if time.monotonic() - self._progress_at >= PROGRESS_PERIOD:
+            self._progress_at = time.monotonic()
+            self._publish(False)
+
+    def _failed(self, exc: BaseException) -> None:
+        self.error = exc
+
+    def _run(self) -> None:
+        """The stepping thread: step to the end, then publish the last progress."""
         try:
-            while not self._stop.is_set() and runner.step_index < end:
-                t0 = time.perf_counter()
-                if self.mode is TimeMode.FAST:
-                    target = min(end, runner.step_index + self.period)
-                    runner.run_to(target)
-                    n = self.period
-                else:
-                    runner.step(1)
-                    n = 1
-                self.stats.add((time.perf_counter() - t0) / n)  # mean per plant step
-                if time.monotonic() - self._progress_at >= PROGRESS_PERIOD:
-                    self._progress_at = time.monotonic()
-                    self._publish(False)
-                if self.mode is TimeMode.REALTIME:
-                    pacer.wait_next()
-            self.wall_end = time.monotonic()
-            self._publish(runner.step_index >= end)
+            self.stepper.run()
+            if self.error is None:
+                self._publish(bool(self.end_step)
+                              and self.runner.step_index >= self.end_step)
         except BaseException as exc:
             self.error = exc
             self.health.report('plant stepping thread', exc)
@@ -149,13 +145,14 @@ class ComposedPlant:
             ct.start()
         spin = self.health.thread('plant executor', spin_until, self.executor, self._stop)
         spin.start()
-        stepper = threading.Thread(target=self._loop, name='plant_steps', daemon=True)
+        stepper = threading.Thread(target=self._run, name='plant_steps', daemon=True)
         stepper.start()
         self._threads += [spin, stepper]
 
     def stop(self) -> None:
         """Stop stepping and serving; destroy the nodes."""
         self._stop.set()
+        self.stepper.request_stop()
         for t in self._threads:
             t.join(5.0)
         for ct in self.composed.values():

@@ -1,25 +1,15 @@
-"""``conveyor-twin record``: record a live twin (or any contract publisher) like a user would.
-
-A standalone recorder for systems it does not own: a node subscribing with ``raw=True`` to the
-contract topics under a namespace, each with the contract QoS (reliability and durability of
-the contract; history depth at least :data:`MIN_DEPTH`, so a busy recorder does not lose a
-best-effort ``/clock`` message between two callbacks), writing the received CDR bytes untouched
-with :class:`~conveyor_twin.record.writer.McapRecorder` (timed flush, bounded queue, lz4 by
-default). The twin's own ``run --record`` records in-process instead and loses nothing at
-1 kHz; this one sees what a subscriber in another process sees.
+"""The standalone recorder of ``conveyor-twin record`` (:mod:`conveyor_twin.cli.record` parses its
+command line and describes it): a node subscribing with ``raw=True`` to contract topics under a
+namespace, each with the contract QoS (history depth at least :data:`MIN_DEPTH`), writing the
+received CDR bytes untouched with :class:`~conveyor_twin.record.writer.McapRecorder`.
 
 Log time of a message: the simulation time it carries (``header.stamp``, or a Clock's time,
 read from the CDR bytes); for messages without a stamp (commands) the latest simulation time
 seen on ``/clock`` (or on the stamped topics when ``/clock`` is not recorded), and the receive
 time (system clock) before any simulation time was seen.
-
-At the end (``--duration`` of wall time, SIGINT or SIGTERM) the file is closed and valid, and a
-summary is printed: per topic the messages received, recorded, decimated, dropped (recorder
-queue full) and ``gaps`` (every-step streams: stamps missing between the first and the last,
-estimated from the smallest stamp spacing seen: what the transport lost).
 """
 
-import argparse
+from dataclasses import dataclass
 import json
 import signal
 import sys
@@ -29,7 +19,9 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from conveyor_twin.contract import CLOCK, OfferedQos, Stamp, Topic
 from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health
+from conveyor_twin.record import qos as record_qos
 from conveyor_twin.record import topics as contract
 from conveyor_twin.record.errors import RecordingError
 from conveyor_twin.record.writer import McapRecorder
@@ -43,7 +35,7 @@ MIN_DEPTH = 100
 TICK_PERIOD = 0.05
 #: Period of graph discovery with ``--discover`` [s].
 DISCOVER_PERIOD = 1.0
-#: Longest single spin of the executor [s] (see main).
+#: Longest single spin of the executor [s] (see record).
 SPIN_TIMEOUT = 0.5
 NODE_NAME = 'conveyor_twin_recorder'
 
@@ -59,7 +51,7 @@ def message_class(type_name: str) -> Any:
         raise RecordingError(str(err)) from None
 
 
-def subscription_qos(offered: contract.OfferedQos) -> QoSProfile:
+def subscription_qos(offered: OfferedQos) -> QoSProfile:
     """Return the QoS to subscribe with: the contract's, with a history of at least MIN_DEPTH."""
     qos = to_rclpy(offered)
     qos.depth = max(qos.depth, MIN_DEPTH)
@@ -108,7 +100,7 @@ class RecordNode(Node):
         a schema in the recorder (checked every :data:`DISCOVER_PERIOD`).
     """
 
-    def __init__(self, recorder: McapRecorder, specs: Sequence[contract.TopicSpec], *,
+    def __init__(self, recorder: McapRecorder, specs: Sequence[Topic], *,
                  namespace: str = '', context: Any = None, discover: bool = False,
                  node_name: str = NODE_NAME) -> None:
         super().__init__(node_name, context=context)
@@ -125,7 +117,7 @@ class RecordNode(Node):
         self._discover = discover
         self._next_discover = 0.0
 
-    def add(self, topic: str, type_name: str, offered: contract.OfferedQos,
+    def add(self, topic: str, type_name: str, offered: OfferedQos,
             stamp: str) -> bool:
         """Subscribe to one topic and declare it to the recorder; return whether it records.
 
@@ -143,7 +135,7 @@ class RecordNode(Node):
             self.get_logger().warning(f'not recording {topic}: {err}')
             return False
         count = self.counts[topic] = _TopicCount()
-        is_clock = stamp == contract.CLOCK
+        is_clock = stamp == Stamp.CLOCK
         self._clock_topic = self._clock_topic or is_clock
         record = self.recorder.record
 
@@ -167,14 +159,14 @@ class RecordNode(Node):
         for topic, types in self.get_topic_names_and_types():
             if topic in self._subs or topic in self.skipped or len(types) != 1:
                 continue
-            if topic != '/clock' and not topic.startswith(prefix):
+            if topic != CLOCK.name and not topic.startswith(prefix):
                 continue
             spec = contract.spec_of(topic, self.namespace)
             type_name = types[0]
             if spec is not None and spec.type_name != type_name:
                 continue
             stamp = spec.stamp if spec else contract.STAMP_BY_TYPE.get(type_name, '')
-            offered = spec.qos if spec else contract.qos_mod.default_qos(type_name)
+            offered = spec.qos if spec else record_qos.default_qos(type_name)
             if type_name in _known_types() and self.add(topic, type_name, offered, stamp):
                 added.append(topic)
         return added
@@ -244,50 +236,39 @@ def parse_decimation(items: Sequence[str], namespace: str) -> Dict[str, int]:
     return result
 
 
-def add_writer_arguments(group, prefix: str = '') -> None:
-    """Add the MCAP writer's options (decimation, compression, flush period, queue size) to
-    an argparse parser or group, named ``--<prefix>decimate`` etc. (``record`` uses no prefix,
-    ``run --record`` the prefix ``record-``)."""
-    group.add_argument(f'--{prefix}decimate', nargs='+', default=[], metavar='NAME=K',
-                       help='record every K-th message of a topic, e.g. parts=10 density=100')
-    group.add_argument(f'--{prefix}compression', default='lz4', choices=('lz4', 'zstd', 'none'))
-    group.add_argument(f'--{prefix}flush-period', type=float, default=0.1,
-                       help='longest wall time between chunk flushes [s] (bounds a kill loss)')
-    group.add_argument(f'--{prefix}queue-size', type=int, default=20000,
-                       help='bound of the queue to the writer thread [messages]')
+@dataclass(frozen=True)
+class RecordOptions:
+    """What ``conveyor-twin record`` records, parsed from its command line.
+
+    :param output: the MCAP file to write (overwritten)
+    :param specs: the contract topics to record
+    :param decimation: ``{absolute topic: K}``: record every K-th message
+    :param namespace: namespace of the twin's topics
+    :param discover: also record graph topics under the namespace with a known type
+    :param compression: chunk compression (``lz4``, ``zstd``, ``none``)
+    :param flush_period: longest wall time between chunk flushes [s]
+    :param queue_size: bound of the queue to the writer thread [messages]
+    :param duration: stop after this wall time [s] (0: until SIGINT/SIGTERM)
+    :param json: print the summary as one JSON object
+    """
+
+    output: str
+    specs: Sequence[Topic]
+    decimation: Mapping[str, int]
+    namespace: str = ''
+    discover: bool = False
+    compression: str = 'lz4'
+    flush_period: float = 0.1
+    queue_size: int = 20000
+    duration: float = 0.0
+    json: bool = False
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Return the argument parser of ``record``."""
-    p = argparse.ArgumentParser(prog='conveyor-twin record', description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument('-o', '--output', required=True, help='MCAP file to write (overwritten)')
-    p.add_argument('--namespace', default='', help="namespace of the twin's topics")
-    p.add_argument('--topics', nargs='+', default=None, metavar='NAME',
-                   help='contract topics to record (default: all but markers): '
-                   + ', '.join(contract.CONTRACT_TOPICS))
-    p.add_argument('--markers', action='store_true', help='record markers too')
-    p.add_argument('--discover', action='store_true',
-                   help='also record graph topics under the namespace with a known type')
-    add_writer_arguments(p)
-    p.add_argument('--duration', type=float, default=0.0,
-                   help='stop after this wall time [s] (0: until SIGINT/SIGTERM)')
-    p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
-    return p
-
-
-def main(argv: Optional[List[str]] = None) -> int:
+def record(options: RecordOptions) -> int:
     """Record until the duration ends, SIGINT/SIGTERM or a failure of the writer thread; print
-    the summary; return 0, 1 if the file cannot be created, 2 for bad options, or
+    the summary; return 0, 1 if the file cannot be created, or
     :data:`~conveyor_twin.health.EXIT_BACKGROUND_FAILURE` if the writer failed (reported at
     once with its traceback)."""
-    args = build_parser().parse_args(argv)
-    try:
-        specs = contract.select(args.topics, markers=args.markers)
-        decimation = parse_decimation(args.decimate, args.namespace)
-    except (KeyError, ValueError) as err:
-        print(f'conveyor-twin record: {err.args[0]}', file=sys.stderr)
-        return 2
     import rclpy
     from rclpy.context import Context
     from rclpy.signals import SignalHandlerOptions
@@ -302,30 +283,30 @@ def main(argv: Optional[List[str]] = None) -> int:
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     health = Health()
     try:
-        recorder = McapRecorder(args.output, compression=args.compression, health=health,
-                                flush_period=args.flush_period, queue_size=args.queue_size,
-                                decimation=decimation,
+        recorder = McapRecorder(options.output, compression=options.compression, health=health,
+                                flush_period=options.flush_period, queue_size=options.queue_size,
+                                decimation=dict(options.decimation),
                                 metadata={'recorded_by': 'conveyor-twin record',
-                                          'namespace': args.namespace})
+                                          'namespace': options.namespace})
     except RecordingError as err:
         print(f'conveyor-twin record: {err}', file=sys.stderr)
         rclpy.try_shutdown(context=context)
         return 1
     executor = make_executor(context)
-    node = RecordNode(recorder, specs, namespace=args.namespace, context=context,
-                      discover=args.discover)
+    node = RecordNode(recorder, options.specs, namespace=options.namespace, context=context,
+                      discover=options.discover)
     executor.add_node(node)
     start = time.monotonic()
     done = make_future(executor)
 
     def tick() -> None:
         node.tick()
-        over = args.duration > 0 and time.monotonic() - start >= args.duration
+        over = options.duration > 0 and time.monotonic() - start >= options.duration
         if (stop['signal'] or over or health.failed) and not done.done():
             done.set_result(True)
 
     timer = node.create_timer(TICK_PERIOD, tick)
-    print(f'recording {len(node.counts)} topics to {args.output}', flush=True)
+    print(f'recording {len(node.counts)} topics to {options.output}', flush=True)
     code = 0
     try:
         while not done.done():
@@ -349,9 +330,5 @@ def main(argv: Optional[List[str]] = None) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     s = summary(node, stats, wall)
-    print(json.dumps(s, sort_keys=True) if args.json else format_summary(s), flush=True)
+    print(json.dumps(s, sort_keys=True) if options.json else format_summary(s), flush=True)
     return code
-
-
-if __name__ == '__main__':
-    sys.exit(main())

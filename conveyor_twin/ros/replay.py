@@ -1,31 +1,12 @@
-"""``conveyor-twin replay FILE``: republish a recording with its original timing.
+"""Republishing a recording with its original timing, for ``conveyor-twin replay``
+(:mod:`conveyor_twin.cli.replay` parses its command line and describes the verb).
 
-Every selected message is published as the recorded CDR bytes (``Publisher.publish(bytes)``,
-no decoding), in log-time order, at ``t0 + (log_time - first_log_time) / rate`` on the
-monotonic clock: absolute deadlines, so errors do not accumulate (sleep until
-:data:`SPIN_MARGIN` before a deadline, then a short busy wait, as the twin's own pacer does).
-Messages of one log time go out back to back. A late message is published at once and counted,
-never skipped.
-
-``/clock`` is the recording's ``/clock`` when it has one; otherwise it is synthesised from the
-log times (one Clock before the first message of each new log time). Each topic is offered with
-the QoS stored in the recording (``offered_qos_profiles``, first profile), else the contract's
-for its type. The accepted commands (``/conveyor_twin/accepted/...``) are not republished
-unless asked (``--accepted-as-commands``, which publishes them on the command topics, at their
-effective time, to drive a live twin); the recorded command topics of a standalone recording
-(``belt_command``, ``actuator_command``) are republished like any topic, so drop them with
-``--topics`` when a live twin listens.
-
-To catch the first messages, start the subscribers first and use ``--wait-for-subscribers``
-with a ``--delay``: a publisher sees its subscribers match a moment before they see it, and a
-message sent in between is lost even on a reliable topic (observed with Fast DDS 3.2, volatile
-durability; 0.5 s was ample here).
-
-With ``--loop``, the recording starts over after its last message plus one recorded spacing;
-``/clock`` then jumps back, as with ``ros2 bag play --loop``.
+:func:`plan` decides what to publish (topics, QoS, renames, a synthesised ``/clock``),
+:func:`schedule` yields the messages of one pass in log-time order, and :class:`Replayer`
+publishes the recorded CDR bytes from a node on absolute monotonic deadlines;
+:func:`replay` runs it all as the verb does.
 """
 
-import argparse
 from collections import deque
 from dataclasses import dataclass, field
 import json
@@ -38,6 +19,7 @@ from typing import Any, Deque, Dict, Iterator, List, Optional, Sequence, Tuple
 import numpy as np
 import yaml
 
+from conveyor_twin.contract import ACTUATOR_COMMAND, BELT_COMMAND, CLOCK
 from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health
 from conveyor_twin.record import reader, topics as contract
 from conveyor_twin.record.errors import RecordingError
@@ -50,8 +32,8 @@ SPIN_MARGIN_NS = 150_000
 #: GIL switch interval while replaying [s] (Python's default is 5 ms).
 SWITCH_INTERVAL = 0.0002
 ACCEPTED_PREFIX = '/conveyor_twin/accepted/'
-CLOCK_TOPIC = '/clock'
-CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
+CLOCK_TOPIC = CLOCK.name
+CLOCK_TYPE = CLOCK.type_name
 _NS_PER_S = 1_000_000_000
 #: Name of the read-ahead thread (and of its failure in the replayer's health).
 PREFETCH_THREAD = 'replay prefetch thread'
@@ -129,8 +111,8 @@ def plan(path: str, *, topics: Optional[Sequence[str]] = None, clock: bool = Tru
             wanted.update(hits)
     result = ReplayPlan(path, {}, [], start_ns=summary['start_ns'], end_ns=summary['end_ns'],
                         step_ns=summary.get('step_ns'))
-    commands = {ACCEPTED_BELT_COMMANDS: contract.resolve('belt_command', namespace),
-                ACCEPTED_ACTUATOR_COMMANDS: contract.resolve('actuator_command', namespace)}
+    commands = {ACCEPTED_BELT_COMMANDS: contract.resolve(BELT_COMMAND.name, namespace),
+                ACCEPTED_ACTUATOR_COMMANDS: contract.resolve(ACTUATOR_COMMAND.name, namespace)}
     for topic, t in recorded.items():
         if topic == CLOCK_TOPIC:
             selected = clock
@@ -410,46 +392,47 @@ class Replayer:
         return stats
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Return the argument parser of ``replay``."""
-    p = argparse.ArgumentParser(prog='conveyor-twin replay', description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument('file', help='MCAP recording')
-    p.add_argument('--rate', type=float, default=1.0, help='speed factor (2: twice as fast)')
-    p.add_argument('--loop', action='store_true', help='start over at the end until Ctrl-C')
-    p.add_argument('--start-offset', type=float, default=0.0,
-                   help='skip this much recorded time from the start [s]')
-    p.add_argument('--topics', nargs='+', default=None, metavar='NAME',
-                   help='topics to replay (default: all but the accepted commands)')
-    p.add_argument('--no-clock', action='store_true', help='do not publish /clock')
-    p.add_argument('--accepted-as-commands', action='store_true',
-                   help='publish the accepted commands on belt_command/actuator_command')
-    p.add_argument('--namespace', default='',
-                   help='namespace of the command topics for --accepted-as-commands')
-    p.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='TIMEOUT',
-                   help='before starting, wait up to TIMEOUT [s] until every topic has a '
-                   'subscriber')
-    p.add_argument('--delay', type=float, default=0.0,
-                   help='wait this long before the first message (after matching) [s]')
-    p.add_argument('--linger', type=float, default=5.0, metavar='SECONDS',
-                   help='at the end, wait up to this long until reliable subscribers have '
-                   'acknowledged every message [s]')
-    p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
-    return p
+@dataclass(frozen=True)
+class ReplayOptions:
+    """What ``conveyor-twin replay`` does, parsed from its command line.
+
+    :param file: the MCAP recording
+    :param rate: speed factor (2: twice as fast) [1] (> 0)
+    :param loop: start over at the end until stopped
+    :param start_offset: skip this much recorded time from the start [s] (>= 0)
+    :param topics: topics to replay (None: all but the accepted commands)
+    :param clock: publish ``/clock``
+    :param accepted_as_commands: publish the accepted commands on the command topics
+    :param namespace: namespace of the command topics for ``accepted_as_commands``
+    :param wait_for_subscribers: before starting, wait up to this long until every topic has
+        a subscriber [s] (0: do not wait)
+    :param delay: wait this long before the first message (after matching) [s]
+    :param linger: at the end, wait up to this long for reliable subscribers'
+        acknowledgements [s]
+    :param json: print the summary as one JSON object
+    """
+
+    file: str
+    rate: float = 1.0
+    loop: bool = False
+    start_offset: float = 0.0
+    topics: Optional[Sequence[str]] = None
+    clock: bool = True
+    accepted_as_commands: bool = False
+    namespace: str = ''
+    wait_for_subscribers: float = 0.0
+    delay: float = 0.0
+    linger: float = 5.0
+    json: bool = False
 
 
-def main(argv: Optional[List[str]] = None) -> int:
-    """Replay a recording; return 0, or 1 if it cannot be read, 2 on bad options,
+def replay(options: ReplayOptions) -> int:
+    """Replay a recording and print the summary; return 0, or 1 if it cannot be read,
     :data:`~conveyor_twin.health.EXIT_BACKGROUND_FAILURE` if the read-ahead thread failed
     otherwise (reported with its traceback)."""
-    args = build_parser().parse_args(argv)
-    if not args.rate > 0 or args.start_offset < 0:
-        print('conveyor-twin replay: --rate must be > 0 and --start-offset >= 0',
-              file=sys.stderr)
-        return 2
     try:
-        p = plan(args.file, topics=args.topics, clock=not args.no_clock,
-                 accepted_as_commands=args.accepted_as_commands, namespace=args.namespace)
+        p = plan(options.file, topics=options.topics, clock=options.clock,
+                 accepted_as_commands=options.accepted_as_commands, namespace=options.namespace)
     except RecordingError as err:
         print(f'conveyor-twin replay: {err}', file=sys.stderr)
         return 1
@@ -460,21 +443,21 @@ def main(argv: Optional[List[str]] = None) -> int:
     context = Context()
     rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('conveyor_twin_replay', context=context)
-    replayer = Replayer(node, p, rate=args.rate, start_offset=args.start_offset,
-                        loop=args.loop)
+    replayer = Replayer(node, p, rate=options.rate, start_offset=options.start_offset,
+                        loop=options.loop)
     previous = {sig: signal.signal(sig, lambda *_: replayer.stop())
                 for sig in (signal.SIGINT, signal.SIGTERM)}
     code = 0
     try:
-        if args.wait_for_subscribers > 0:
-            matched = replayer.wait_for_subscribers(args.wait_for_subscribers)
+        if options.wait_for_subscribers > 0:
+            matched = replayer.wait_for_subscribers(options.wait_for_subscribers)
             if not matched:
                 print('conveyor-twin replay: not every topic has a subscriber; starting anyway',
                       file=sys.stderr, flush=True)
-        if args.delay > 0:
-            time.sleep(args.delay)
+        if options.delay > 0:
+            time.sleep(options.delay)
         topics = ', '.join(sorted(p.topics))
-        print(f'replaying {args.file} at rate {args.rate:g}: {topics}', flush=True)
+        print(f'replaying {options.file} at rate {options.rate:g}: {topics}', flush=True)
         stats = replayer.run()
     except RecordingError as err:
         print(f'conveyor-twin replay: {err}', file=sys.stderr)
@@ -484,15 +467,15 @@ def main(argv: Optional[List[str]] = None) -> int:
             raise
         stats, code = replayer.stats, EXIT_BACKGROUND_FAILURE
     finally:
-        if not replayer.wait_for_acks(args.linger):
+        if not replayer.wait_for_acks(options.linger):
             print('conveyor-twin replay: not every subscriber acknowledged the last messages '
-                  f'within {args.linger:g} s', file=sys.stderr, flush=True)
+                  f'within {options.linger:g} s', file=sys.stderr, flush=True)
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         node.destroy_node()
         rclpy.try_shutdown(context=context)
     s = stats.as_dict()
-    if args.json:
+    if options.json:
         print(json.dumps(s, sort_keys=True), flush=True)
     else:
         lat = s['lateness_ms']
@@ -503,7 +486,3 @@ def main(argv: Optional[List[str]] = None) -> int:
         for topic, n in sorted(s['published'].items()):
             print(f'  {topic:<40}{n:>10}')
     return code
-
-
-if __name__ == '__main__':
-    sys.exit(main())

@@ -11,11 +11,11 @@ Log time of a recorded message: its simulation time (the step's; an edge's own),
 they were published: at or a few steps after the step they show.
 """
 
-import argparse
+from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from conveyor_twin.cell import default_cell_text
-from conveyor_twin.coord.commands import ACTUATOR, BELT, CommandRejected
+from conveyor_twin.coord.commands import CommandKind, CommandRejected
 from conveyor_twin.record import topics as contract
 from conveyor_twin.record.errors import RecordingError
 from conveyor_twin.record.sink import RecordingSink
@@ -63,24 +63,34 @@ class TwinRecording:
 
 
 # -- ``conveyor-twin run`` options ----------------------------------------------------------
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    """Add ``--record`` and its options (as ``conveyor-twin record`` has them) and
-    ``--command`` to the parser of ``run``."""
-    g = p.add_argument_group('recording (composed layout)')
-    g.add_argument('--record', default=None, metavar='FILE.mcap',
-                   help='record every stream, /clock, markers, diagnostics and the accepted '
-                   'commands in-process to this MCAP file (overwritten)')
-    g.add_argument('--record-topics', nargs='+', default=None, metavar='NAME',
-                   help='record only these contract topics (default: every published one): '
-                   + ', '.join(n for n, s in contract.CONTRACT_TOPICS.items() if not s.command))
-    from conveyor_twin.ros.record_node import add_writer_arguments
-    add_writer_arguments(g, prefix='record-')
-    g.add_argument('--command', nargs='+', default=[], metavar='STEP:KIND:NAME=VALUE',
-                   help='apply a command at a step, e.g. 500:belt:main=0.2 '
-                   '1200:actuator:pusher=0.05 (validated like belt_command/actuator_command)')
+@dataclass(frozen=True)
+class RecordingOptions:
+    """``run``'s recording options, parsed from its command line
+    (:func:`conveyor_twin.cli.record.recording_options`).
+
+    :param path: ``--record``: the MCAP file to write (None: no recording)
+    :param topics: ``--record-topics``: contract topics to record (None: every published one)
+    :param decimate: ``--record-decimate``: ``NAME=K`` items
+    :param compression: ``--record-compression``: ``lz4``, ``zstd`` or ``none``
+    :param flush_period: ``--record-flush-period``: longest wall time between flushes [s]
+    :param queue_size: ``--record-queue-size``: bound of the writer's queue [messages]
+    :param commands: ``--command``: ``STEP:KIND:NAME=VALUE`` items
+    :param cell_file: ``--cell``: the cell file attached to the recording ('' : the default)
+    :param markers_rate: ``--markers-rate`` [Hz], stored in the metadata
+    """
+
+    path: Optional[str] = None
+    topics: Optional[Sequence[str]] = None
+    decimate: Sequence[str] = ()
+    compression: str = 'lz4'
+    flush_period: float = 0.1
+    queue_size: int = 20000
+    commands: Sequence[str] = ()
+    cell_file: str = ''
+    markers_rate: float = 30.0
 
 
-def parse_commands(items: Sequence[str]) -> List[Tuple[int, str, str, float]]:
+def parse_commands(items: Sequence[str]) -> List[Tuple[int, CommandKind, str, float]]:
     """Parse ``STEP:KIND:NAME=VALUE`` items.
 
     :raises ValueError: naming the malformed item.
@@ -88,10 +98,10 @@ def parse_commands(items: Sequence[str]) -> List[Tuple[int, str, str, float]]:
     out = []
     for item in items:
         try:
-            step_text, kind, rest = item.split(':', 2)
+            step_text, kind_text, rest = item.split(':', 2)
             name, value_text = rest.rsplit('=', 1)
-            step, value = int(step_text), float(value_text)
-            if step < 1 or kind not in (BELT, ACTUATOR) or not name:
+            step, value, kind = int(step_text), float(value_text), CommandKind(kind_text)
+            if step < 1 or not name:
                 raise ValueError
         except ValueError:
             raise ValueError(f'--command {item!r}: expected STEP:KIND:NAME=VALUE with STEP >= 1, '
@@ -108,14 +118,14 @@ def schedule_commands(composed: Any, items: Sequence[str]) -> None:
     book = composed.twin.commands
     for step, kind, name, value in parse_commands(items):
         try:
-            command = (book.validate_belt(name, value) if kind == BELT
+            command = (book.validate_belt(name, value) if kind == CommandKind.BELT
                        else book.validate_actuator(name, value))
         except CommandRejected as exc:
             raise ValueError(f'--command {step}:{kind}:{name}={value}: {exc}') from None
         book.schedule(step, command)
 
 
-def start_recording(composed: Any, args: argparse.Namespace, *, seed: int,
+def start_recording(composed: Any, options: RecordingOptions, *, seed: int,
                     mode: str) -> Optional[TwinRecording]:
     """Apply ``--command`` and, with ``--record``, open the file and subscribe a recorder to the twin.
 
@@ -123,35 +133,36 @@ def start_recording(composed: Any, args: argparse.Namespace, *, seed: int,
     :raises ValueError: for invalid options (the message names them).
     :raises RecordingError: if the file cannot be created.
     """
-    schedule_commands(composed, args.command)
-    if not args.record:
+    schedule_commands(composed, options.commands)
+    if not options.path:
         return None
     from conveyor_twin.ros.record_node import parse_decimation
     namespace = composed.coordinator.get_namespace()
     selection = None
-    if args.record_topics is not None:
+    if options.topics is not None:
         try:
-            specs = contract.select(args.record_topics)
+            specs = contract.select(options.topics)
         except KeyError as exc:
             raise ValueError(f'--record-topics: {exc.args[0]}') from None
         selection = [contract.resolve(s.name, namespace) for s in specs]
-    decimation = parse_decimation(args.record_decimate, namespace)
-    if args.cell:
+    decimation = parse_decimation(options.decimate, namespace)
+    if options.cell_file:
         try:
-            with open(args.cell, encoding='utf-8') as f:
+            with open(options.cell_file, encoding='utf-8') as f:
                 cell_text = f.read()
         except OSError as exc:
-            raise RecordingError(f'cannot read {args.cell} to attach it: {exc}') from None
+            raise RecordingError(f'cannot read {options.cell_file} to attach it: {exc}') \
+                from None
     else:
         cell_text = default_cell_text()
     recorder = McapRecorder(
-        args.record, compression=args.record_compression,
-        flush_period=args.record_flush_period, queue_size=args.record_queue_size,
+        options.path, compression=options.compression,
+        flush_period=options.flush_period, queue_size=options.queue_size,
         topics=selection, decimation=decimation, cell_yaml=cell_text, seed=seed,
         step_ns=composed.twin.dt_ns,
         metadata={'recorded_by': 'conveyor-twin run', 'namespace': namespace,
-                  'markers_rate': repr(float(args.markers_rate)), 'mode': mode,
-                  'cell_file': args.cell or '', 'commands': ' '.join(args.command),
+                  'markers_rate': repr(float(options.markers_rate)), 'mode': mode,
+                  'cell_file': options.cell_file or '', 'commands': ' '.join(options.commands),
                   **_scenario_metadata(composed)},
         on_thread_start=_writer_priority if mode == 'realtime' else None,
         health=composed.twin.health)

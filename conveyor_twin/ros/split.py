@@ -1,76 +1,91 @@
 """The split layout's coordinator process: micro, macro and coordinator nodes as three processes.
 
-``scale_coordinator`` (this module's :func:`coordinator_main`) drives time; every step it sends
-the step input over the coupling topic and waits for both scale nodes to report the step done.
-``conveyor-twin run --split`` (:mod:`conveyor_twin.cli.run`) starts the three processes with
-:func:`ros_args` and prints the summary line the coordinator prints (:data:`SUMMARY_PREFIX`).
-With ``macro``/``auto`` zones the micro and macro nodes also exchange the scale hand-over every
-step (micro state to the macro node, edits back; :mod:`conveyor_twin.coord.mirror`), so the
-streams are bit-identical to the composed layout's.
+``scale_coordinator`` (this module's :func:`coordinator_main`) drives time; its one stage is
+the two scale processes (:class:`~conveyor_twin.split.remote.RemoteStage`), which every step
+receive the step input over the coupling topic and report it done. :class:`CouplingTransport`
+only moves those bytes between ROS and the stage. The processes are started by
+:func:`conveyor_twin.split.launch.launch` (``conveyor-twin run --split``, the testing harness),
+with ``macro``/``auto`` zones the scale processes also exchange the hand-over every step
+(:mod:`conveyor_twin.split.mirror`), so the streams are bit-identical to the composed layout's.
 """
 
 import json
-import os
 import signal
 import sys
 import threading
 import time
-from typing import Dict, List, Optional
+from typing import Callable, List, Optional, Set
 
-from conveyor_twin.coord.assembly import build_twin
-from conveyor_twin.coord.codec import decode_counters, MACRO_ROLE, MICRO_ROLE
+from rclpy.context import Context
+from rclpy.node import Node
+from std_msgs.msg import UInt8MultiArray
+
 from conveyor_twin.coord.runner import Runner
 from conveyor_twin.coord.timing import TimeMode
-from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health, process_alive
-from conveyor_twin.ros.coordinator_node import CoordinatorNode, ROLE_NODES
+from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health
 from conveyor_twin.ros.compat import make_executor, spin_until
+from conveyor_twin.ros.coordinator_node import CoordinatorNode
+from conveyor_twin.ros.qos import COUPLING_QOS
 from conveyor_twin.ros.standalone import start_process
+from conveyor_twin.split import topics
+from conveyor_twin.split.launch import check_scale_processes, scale_pids_from_env, SUMMARY_PREFIX
+from conveyor_twin.split.remote import RemoteStage
+from conveyor_twin.split.roles import CoordinatorRole
 
 # s for the scale processes to appear and match: each loads its kernels first (~20 s on a
 # loaded 2-core machine); known scale processes that die meanwhile end the wait at once
 SCALE_CONNECT_TIMEOUT = 120.0
-SUMMARY_PREFIX = 'conveyor_twin summary: '
-#: Environment variable through which ``conveyor-twin run --split`` tells the coordinator the
-#: process ids of the scale nodes: ``micro_simulator=PID,macro_simulator=PID``.
-SCALE_PIDS_ENV = 'CONVEYOR_TWIN_SCALE_PIDS'
 WATCH_PERIOD = 0.05  # s between two checks of the run and the scale processes
 
 
-def scale_pids_from_env(environ=os.environ) -> Dict[int, int]:
-    """Return the scale processes' ids by role from :data:`SCALE_PIDS_ENV` (empty if unset)."""
-    roles = {name: role for role, name in ROLE_NODES.items()}
-    out: Dict[int, int] = {}
-    for item in filter(None, environ.get(SCALE_PIDS_ENV, '').split(',')):
-        name, _, pid = item.partition('=')
-        if name in roles and pid.isdigit():
-            out[roles[name]] = int(pid)
-    return out
+class CouplingTransport:
+    """The coordinator's end of the coupling topics: a node of its own that publishes the
+    payloads and hands every reply to :attr:`receiver` (the remote stage). It is spun by its
+    own executor thread: a step, reset or spawn service callback of the coordinator node waits
+    for the replies, so they cannot share that node's executor."""
+
+    def __init__(self, context: Context, namespace: Optional[str] = None) -> None:
+        self.node = Node('_scale_coordinator_coupling', context=context, namespace=namespace,
+                         start_parameter_services=False)
+        self._context = context
+        self.receiver: Callable[[bytes], None] = self._unbound
+        self._pub = self.node.create_publisher(UInt8MultiArray, topics.COUPLING_TOPIC,
+                                               COUPLING_QOS)
+        self._sub = self.node.create_subscription(UInt8MultiArray, topics.DONE_TOPIC,
+                                                  lambda data: self.receiver(data),
+                                                  COUPLING_QOS, raw=True)
+
+    def _unbound(self, data: bytes) -> None:
+        raise RuntimeError('a scale node replied before the coordinator had a remote stage')
+
+    def send(self, data: bytes) -> None:
+        """Publish CDR bytes to the scale nodes."""
+        self._pub.publish(data)
+
+    def connected(self, peers: int) -> bool:
+        """True once ``peers`` scale nodes are matched both ways: our writer sees their
+        readers, our reader sees their writers."""
+        return (self._pub.get_subscription_count() >= peers
+                and self._sub.get_publisher_count() >= peers)
+
+    def alive(self) -> bool:
+        """False once the context shut down."""
+        return self._context.ok()
+
+    def node_names(self) -> Set[str]:
+        """The names of the nodes in the ROS graph."""
+        return {name for name, _ in self.node.get_node_names_and_namespaces()}
 
 
-def check_scale_processes(health: Health, pids: Dict[int, int]) -> None:
-    """Report every scale process of ``pids`` that has ended to ``health`` (once each)."""
-    for role, pid in pids.items():
-        if not process_alive(pid):
-            health.report(f'{ROLE_NODES[role]} process',
-                          message=f'the process (pid {pid}) ended during the run')
-
-
-def _wait_for_scales(node: CoordinatorNode, health: Health, pids: Dict[int, int],
-                     stop: threading.Event) -> bool:
+def _wait_for_scales(remote: RemoteStage, health: Health, stop: threading.Event) -> bool:
     """Wait up to :data:`SCALE_CONNECT_TIMEOUT` until the scale nodes are connected; return
     True if so. A scale process that ends meanwhile is reported; it, or ``stop``, ends the wait."""
     deadline = time.monotonic() + SCALE_CONNECT_TIMEOUT
     while time.monotonic() < deadline and not stop.is_set():
-        if node.wait_for_scales(min(0.25, max(0.0, deadline - time.monotonic()))):
+        if remote.wait_connected(min(0.25, max(0.0, deadline - time.monotonic()))):
             return True
-        check_scale_processes(health, pids)
+        check_scale_processes(health, remote.pids)
     return False
-
-
-def _remote_counters(node: CoordinatorNode) -> Dict[str, float]:
-    replies = node.last_replies()
-    return {**decode_counters('micro', replies.get(MICRO_ROLE, b'')),
-            **decode_counters('macro', replies.get(MACRO_ROLE, b''))}
 
 
 def coordinator_main(argv: Optional[List[str]] = None) -> int:
@@ -84,7 +99,6 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
         return 1
     context, params, cell, seed = started
     max_steps = round(params.duration / cell.settings.step) if params.duration > 0 else None
-    assembled = build_twin(cell, seed=seed, layout='coordinator')
     scenario = None
     if params.scenario:
         from conveyor_twin.faults.scenario import load_scenario, ScenarioError
@@ -95,23 +109,21 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
                   file=sys.stderr, flush=True)
             context.try_shutdown()
             return 2
-    runner = Runner(assembled.twin, params.mode, max_steps=max_steps)
-    health = assembled.twin.health
-    pids = scale_pids_from_env()
-    holder: Dict[str, CoordinatorNode] = {}
-    node = CoordinatorNode(assembled.twin, runner, context=context,
-                           remote_roles=assembled.remote_roles,
-                           counters=lambda: _remote_counters(holder['node']),
-                           scale_pids=pids)
-    holder['node'] = node
+    transport = CouplingTransport(context)
+    role = CoordinatorRole(cell, seed=seed, transport=transport, pids=scale_pids_from_env())
+    remote = role.remote
+    runner = Runner(role.twin, params.mode, max_steps=max_steps)
+    health = role.twin.health
+    node = CoordinatorNode(role.twin, runner, context=context, spawn=role.spawn,
+                           holds_part=remote.holds_part, counters=remote.counters,
+                           refresh=remote.counters)
+    remote.warn = node.get_logger().warning
     if scenario is not None:  # triggers read what the scale nodes measure after each step
-        node.measures_wanted = scenario.conditional
-        assembled.arm_scenario(scenario, edge_count=node.measured_edge_count,
-                               zone_parts_of=node.measured_zone_parts)
+        role.arm_scenario(scenario)
     executor = make_executor(context)
     executor.add_node(node)
     coupling_executor = make_executor(context)
-    coupling_executor.add_node(node.coupling_node)
+    coupling_executor.add_node(transport.node)
     spin_stop = threading.Event()
     spinners = [health.thread(name, spin_until, ex, spin_stop)
                 for name, ex in (('executor thread', executor),
@@ -136,7 +148,7 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
         except FoxgloveError as exc:
             node.get_logger().error(f'{exc}; the twin was not started')
             code = 2
-    if code == 0 and not _wait_for_scales(node, health, pids, stop):
+    if code == 0 and not _wait_for_scales(remote, health, stop):
         if not health.failed and not stop.is_set():
             node.get_logger().error('micro_simulator and macro_simulator did not connect '
                                     f'within {SCALE_CONNECT_TIMEOUT:g} s')
@@ -146,7 +158,7 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
         while not stop.is_set():
             if params.mode is not TimeMode.LOCKSTEP and not runner.running:
                 break
-            check_scale_processes(health, pids)
+            check_scale_processes(health, remote.pids)
             stop.wait(WATCH_PERIOD)
         runner.stop()
     if health.failed:  # every failure (a step too) was reported once and logged at ERROR
@@ -160,31 +172,10 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
         spinner.join(5.0)
     executor.shutdown(timeout_sec=5.0)
     coupling_executor.shutdown(timeout_sec=5.0)
-    node.coupling_node.destroy_node()
+    transport.node.destroy_node()
     node.destroy_node()
     context.try_shutdown()
     return code
-
-
-def ros_args(cell_file: str, seed: Optional[int], mode: str, duration: float,
-             namespace: Optional[str], markers_rate: float, *, foxglove: str = '',
-             scenario: str = '') -> List[str]:
-    """Return the ``--ros-args`` of the three processes of a split run (durations [s], rates
-    [Hz]; ``foxglove``: ``[HOST:]PORT`` of the coordinator's Foxglove view, empty: none;
-    ``scenario``: the fault scenario file the coordinator arms, empty: none)."""
-    args = ['--ros-args', '-p', f'mode:={mode}', '-p', f'duration:={float(duration)}',
-            '-p', f'markers_rate:={float(markers_rate)}']
-    if cell_file:  # rcl cannot parse an empty override; empty is the default anyway
-        args += ['-p', f'cell_file:={cell_file}']
-    if seed is not None:
-        args += ['-p', f'seed:={seed}']
-    if foxglove:  # quoted: rcl would read a bare port as an integer
-        args += ['-p', f'foxglove:="{foxglove}"']
-    if scenario:
-        args += ['-p', f'scenario:={scenario}']
-    if namespace:
-        args += ['-r', f'__ns:={namespace}']
-    return args
 
 
 if __name__ == '__main__':

@@ -16,18 +16,14 @@ from rclpy.context import Context
 from rclpy.node import Node
 
 from conveyor_twin.cell import CellError, load_cell
-from conveyor_twin.coord.assembly import AssembledTwin, build_twin, Layout
+from conveyor_twin.coord.layout import Role
 from conveyor_twin.coord.runner import freeze_heap
 from conveyor_twin.coord.warmup import warm_up
 from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health
 from conveyor_twin.ros.compat import make_executor, spin_until
 from conveyor_twin.ros.params import declare_twin_parameters
-
-#: Set (to ``1``) by ``conveyor-twin run --split`` for its scale processes: they ignore SIGINT
-#: and stop on SIGTERM, which the run sends once the coordinator has stopped; so a Ctrl-C in
-#: the terminal (SIGINT to every process) never leaves the coordinator waiting for a scale
-#: process that is gone.
-IGNORE_SIGINT_ENV = 'CONVEYOR_TWIN_IGNORE_SIGINT'
+from conveyor_twin.split.launch import IGNORE_SIGINT_ENV
+from conveyor_twin.split.roles import build_scale_role, ScaleRole
 
 
 def start_process(name: str, argv: Optional[List[str]] = None):
@@ -55,34 +51,34 @@ def start_process(name: str, argv: Optional[List[str]] = None):
     return context, params, cell, seed
 
 
-def run_scale_node(layout: Layout, make_node: Callable[..., Node],
+def run_scale_node(role: Role, make_node: Callable[..., Node],
                    argv: Optional[List[str]] = None) -> int:
-    """Build the scale role ``layout`` (``micro`` or ``macro``) of the split layout from the
-    node parameters, wrap it in its node, serve the coupling topic until shutdown.
+    """Build the scale ``role`` (micro or macro) of the split layout from the node parameters,
+    wrap it in its node, serve the coupling topic until shutdown.
 
-    :param make_node: called with the :class:`AssembledTwin` and the node's keyword
-        arguments (``context``, ``remote``, ``markers_rate``, ``step_s``, ``health``); returns
-        the node.
+    :param make_node: called with the :class:`~conveyor_twin.split.scale.ScaleRole` and the
+        node's keyword arguments (``context``, ``markers_rate``, ``step_s``, ``health``);
+        returns the node.
     :return: 0 after SIGINT/SIGTERM, 1 for an invalid cell, :data:`EXIT_BACKGROUND_FAILURE`
         after a thread of the process failed.
     """
     ignore_sigint = os.environ.get(IGNORE_SIGINT_ENV) == '1'
     if ignore_sigint:  # from the start: a Ctrl-C during the set-up must not end it either
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-    started = start_process(f'{layout}node', argv)
+    started = start_process(f'{role.name.lower()}node', argv)
     if started is None:
         return 1
     context, params, cell, seed = started
-    assembled: AssembledTwin = build_twin(cell, seed=seed, layout=layout)
+    scale: ScaleRole = build_scale_role(role, cell, seed=seed)
     warm_up(cell, seed)  # load the step kernels now, not during the first steps
     health = Health()
-    node = make_node(assembled, context=context, remote=True, markers_rate=params.markers_rate,
+    node = make_node(scale, context=context, markers_rate=params.markers_rate,
                      step_s=cell.settings.step, health=health)
     if params.scenario:  # the coordinator checks the file; here only: does it need measures?
         from conveyor_twin.faults.scenario import load_scenario, ScenarioError
         try:
             if load_scenario(params.scenario, cell).conditional:
-                node.measure = assembled.trigger_measures()
+                scale.measure = scale.trigger_measures()
         except ScenarioError:
             pass
     executor = make_executor(context)

@@ -1,7 +1,8 @@
 """A node's contract streams published from the twin's frames (a frame sink).
 
 :class:`StreamPublisher` creates one publisher per stream it is given (from the contract table)
-and, for every frame, publishes the bytes the frame holds for those streams with
+and, for every frame, publishes the bytes the frame holds for those streams
+(:data:`conveyor_twin.contract.FRAME` says where) with
 :class:`~conveyor_twin.ros.qos.RawPublisher` (no message objects, refusals counted). A stream
 the frame does not carry in this process is skipped.
 """
@@ -10,22 +11,18 @@ from operator import attrgetter
 from typing import Any, Dict, Sequence
 
 from conveyor_twin import contract
+from conveyor_twin.contract import Shape
 from conveyor_twin.output.frame import Frame
 from conveyor_twin.ros.endpoints import create_publisher
 from conveyor_twin.ros.qos import RawPublisher
-
-#: Frame attribute of every stream with one message per step (or none).
-_SINGLE = {contract.CLOCK: 'clock', contract.BELT_STATES: 'belt_states',
-           contract.ACTUATOR_STATES: 'actuator_states', contract.DIAGNOSTICS: 'diagnostics',
-           contract.PARTS: 'parts', contract.LIGHT_BARRIERS: 'light_barriers',
-           contract.FAULTS: 'faults'}
 
 
 class StreamPublisher:
     """Publish ``streams`` of every frame on ``node``.
 
     :param node: the rclpy node that owns the publishers.
-    :param streams: contract streams (those of :data:`conveyor_twin.output.frame.FRAME_STREAMS`).
+    :param streams: contract streams (those of :data:`conveyor_twin.output.frame.FRAME_STREAMS`
+        are published from the frames; others, e.g. ``markers``, only get their publisher).
     """
 
     def __init__(self, node: Any, streams: Sequence[contract.Topic]) -> None:
@@ -37,19 +34,22 @@ class StreamPublisher:
             self.publishers[topic] = create_publisher(node, topic)
             raw[topic] = RawPublisher(self.publishers[topic], logger)
         self.raw_publishers = tuple(raw.values())
-        self._single = tuple((attrgetter(_SINGLE[t]), raw[t]) for t in raw if t in _SINGLE)
-        self._edges = raw.get(contract.LIGHT_BARRIER_EDGES)
-        self._density = raw.get(contract.DENSITY)
+        slots = [(attrgetter(s.attribute), raw[s.topic], s.shape) for s in contract.FRAME
+                 if s.topic in raw]
+        self._one = tuple((get, send) for get, send, shape in slots if shape is Shape.ONE)
+        self._stamped = tuple((get, send) for get, send, shape in slots
+                              if shape is Shape.STAMPED)
+        self._many = tuple((get, send) for get, send, shape in slots if shape is Shape.MANY)
 
     def on_frame(self, frame: Frame) -> None:
         """Publish this node's streams of the frame."""
-        for get, publish in self._single:
+        for get, publish in self._one:
             data = get(frame)
             if data is not None:
                 publish(data)
-        if self._edges is not None:
-            for _, data in frame.edges:
-                self._edges(data)
-        if self._density is not None:
-            for data in frame.density:
-                self._density(data)
+        for get, publish in self._stamped:
+            for _, data in get(frame):
+                publish(data)
+        for get, publish in self._many:
+            for data in get(frame):
+                publish(data)

@@ -3,38 +3,27 @@
 :func:`start_layout` is the only place that knows how a lockstep twin of a cell is built and
 started, composed in this process or split over three processes; the harness talks to whatever
 it starts through ROS alone (services, streams, commands), so switching the assembly touches
-this module only.
+this module only. The split processes are started by the one launcher of the split layout
+(:func:`conveyor_twin.split.launch.launch`), each writing a log file.
 """
 
 import os
 from pathlib import Path
-import subprocess
-import sys
-from typing import List, Literal, Optional, Tuple
+from typing import List, Optional, Tuple
 
 from rclpy.context import Context
 
 from conveyor_twin.cell.model import Cell
+from conveyor_twin.coord.layout import Layout
 from conveyor_twin.coord.stages import MacroStage
 from conveyor_twin.coord.timing import TimeMode
+from conveyor_twin.split.launch import launch, log_tail, ros_args, SplitProcesses
 from conveyor_twin.testing.processes import RosProcesses
 
-Layout = Literal['composed', 'split']
-LAYOUTS = ('composed', 'split')
-SPLIT_MODULES = ('conveyor_twin.ros.micro_node', 'conveyor_twin.ros.macro_node',
-                 'conveyor_twin.ros.split')
-#: The node each split module runs (the name a failure is reported by).
-SPLIT_NODES = {'micro_node': 'micro_simulator', 'macro_node': 'macro_simulator',
-               'split': 'scale_coordinator'}
-LOG_TAIL = 2000  # characters of a process's log quoted in a failure [1]
-
-
-def log_tail(path: Path, size: int = LOG_TAIL) -> str:
-    """Return the last ``size`` characters of a log file ('' if there is none)."""
-    try:
-        return path.read_text(errors='replace')[-size:]
-    except OSError:
-        return ''
+#: The layouts a lockstep twin can run in.
+LAYOUTS = tuple(Layout)
+__all__ = ['density_per_step', 'Layout', 'LAYOUTS', 'log_tail', 'RunningLayout',
+           'start_layout']
 
 
 def density_per_step(cell: Cell) -> int:
@@ -47,28 +36,27 @@ class RunningLayout:
 
     :param composed: the in-process twin (composed layout), else None
     :param processes: the twin's processes (split layout), else None
-    :param children: the split processes: (node name, process, log file)
+    :param split: the split processes as the launcher started them, else None
     """
 
     def __init__(self, *, composed: Optional[object] = None,
                  processes: Optional[RosProcesses] = None,
-                 children: Tuple[Tuple[str, subprocess.Popen, Path], ...] = ()) -> None:
+                 split: Optional[SplitProcesses] = None) -> None:
         self.composed = composed
         self.processes = processes
-        self.children = children
+        self.split = split
         self._stopping = False
 
     def logs(self) -> str:
         """Return the last lines each split process wrote ('' when composed)."""
-        return '\n'.join(f'--- {log.name}\n{log_tail(log)}' for _, _, log in self.children)
+        return self.split.logs() if self.split is not None else ''
 
     def dead(self) -> List[Tuple[str, int, Path]]:
         """Return the split processes that ended while the twin runs: (node name, exit code,
         log file); none once :meth:`stop` began."""
-        if self._stopping:
+        if self._stopping or self.split is None:
             return []
-        return [(name, code, log) for name, process, log in self.children
-                if (code := process.poll()) is not None]
+        return [(c.name, c.proc.returncode, c.log) for c in self.split.dead()]
 
     def stop(self) -> None:
         """Stop the twin (and its processes, cleaning the shared memory they leave)."""
@@ -97,34 +85,21 @@ def start_layout(cell: Cell, cell_file: Optional[str], *, seed: int, layout: Lay
     :return: the running twin
     :raises ValueError: on an unknown layout, or a split layout of a cell without a file
     """
-    if layout == 'composed':
+    if layout == Layout.COMPOSED:
         from conveyor_twin.ros.compose import ComposedTwin
 
         twin = ComposedTwin(cell, seed=seed, mode=TimeMode.LOCKSTEP, context=context,
                             markers_rate=0.0, foxglove=foxglove, scenario=scenario)
         twin.start()
         return RunningLayout(composed=twin)
-    if layout != 'split':
+    if layout != Layout.SPLIT:
         raise ValueError(f'layout {layout!r} is not one of {", ".join(LAYOUTS)}')
     if cell_file is None and not cell.source_file.startswith('<embedded'):
         raise ValueError(f'the split layout loads the cell in each process: pass a cell file, '
                          f'not a cell built in memory ({cell.source_file})')
-    from conveyor_twin.ros.split import ros_args, SCALE_PIDS_ENV
-
     args = ros_args(os.path.abspath(cell_file) if cell_file else '', seed, 'lockstep', 0.0,
                     None, 0.0, foxglove=foxglove,
                     scenario=os.path.abspath(scenario.source_file) if scenario else '')
     processes = RosProcesses(domain_id=domain_id)
-    children = []
-    env = {}
-    for module in SPLIT_MODULES:
-        short = module.rsplit('.', 1)[1]
-        path = log_dir / f'{short}.log'
-        if module == SPLIT_MODULES[-1]:  # the coordinator: it watches the scale processes
-            env[SCALE_PIDS_ENV] = ','.join(f'{name}={process.pid}'
-                                           for name, process, _ in children)
-        with open(path, 'w') as log:
-            process = processes.start([sys.executable, '-m', module] + args, env=env,
-                                      stdout=log, stderr=log)
-        children.append((SPLIT_NODES[short], process, path))
-    return RunningLayout(processes=processes, children=tuple(children))
+    split = launch(args, start=processes.start, log_dir=log_dir)
+    return RunningLayout(processes=processes, split=split)

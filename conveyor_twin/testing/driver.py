@@ -15,19 +15,23 @@ from rclpy.context import Context
 from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
 from rclpy.serialization import deserialize_message
 
+from conveyor_twin import contract
 from conveyor_twin.ros.qos import COMMAND_QOS
 from conveyor_twin.testing.errors import TwinTimeoutError
 from conveyor_twin.testing.outages import EdgeAccount
 from conveyor_twin.testing.probe import Probe, STREAMS
 from conveyor_twin.testing.ros_env import wait_for
 from conveyor_twin.wire import cdr
-from conveyor_twin.wire.fault_state import decode_fault_state, FaultStateData
+from conveyor_twin.wire.decoders import decode_fault_state
+from conveyor_twin.wire.fault_state import FaultStateData
 
 TIMEOUT = 60.0  # longest wait for one service answer, one chunk's streams or one command [s]
-EVERY_STEP = ('parts', 'light_barriers', 'belt_states', 'actuator_states')
-HASHED = ('parts', 'density', 'light_barriers', 'light_barrier_edges', 'belt_states',
-          'actuator_states')
-LISTENED = tuple(STREAMS) + ('command_status', 'belt_command', 'actuator_command')
+EVERY_STEP = tuple(t.name for t in (contract.PARTS, contract.LIGHT_BARRIERS,
+                                      contract.BELT_STATES, contract.ACTUATOR_STATES))
+HASHED = tuple(t.name for t in (contract.PARTS, contract.DENSITY, contract.LIGHT_BARRIERS,
+                                contract.LIGHT_BARRIER_EDGES, contract.BELT_STATES,
+                                contract.ACTUATOR_STATES))
+LISTENED = tuple(STREAMS) + tuple(t.name for t in contract.REPLIES + contract.COMMANDS)
 
 
 class CommandResult(NamedTuple):
@@ -91,15 +95,16 @@ class Driver:
         self.probe = Probe(context, topics=LISTENED, name=name)
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.probe)
-        self.step_client = self.probe.create_client(Step, 'step')
-        self.spawn_client = self.probe.create_client(SpawnParts, 'spawn_parts')
-        self.reset_client = self.probe.create_client(Reset, 'reset')
+        self.step_client = self.probe.create_client(Step, contract.STEP.name)
+        self.spawn_client = self.probe.create_client(SpawnParts, contract.SPAWN_PARTS.name)
+        self.reset_client = self.probe.create_client(Reset, contract.RESET.name)
         self._fault_state: tuple = (None, None)  # (latest faults message, decoded)
-        self.inject_client = self.probe.create_client(InjectFault, 'inject_fault')
-        self.clear_client = self.probe.create_client(ClearFault, 'clear_fault')
-        self.belt_pub = self.probe.create_publisher(BeltCommand, 'belt_command', COMMAND_QOS)
-        self.actuator_pub = self.probe.create_publisher(ActuatorCommand, 'actuator_command',
-                                                        COMMAND_QOS)
+        self.inject_client = self.probe.create_client(InjectFault, contract.INJECT_FAULT.name)
+        self.clear_client = self.probe.create_client(ClearFault, contract.CLEAR_FAULT.name)
+        self.belt_pub = self.probe.create_publisher(BeltCommand, contract.BELT_COMMAND.name,
+                                                   COMMAND_QOS)
+        self.actuator_pub = self.probe.create_publisher(
+            ActuatorCommand, contract.ACTUATOR_COMMAND.name, COMMAND_QOS)
 
     def wait_connected(self, timeout: Optional[float] = None) -> bool:
         """Wait until every stream, service and command topic of the twin is matched (or
@@ -112,7 +117,7 @@ class Driver:
                         and self.belt_pub.get_subscription_count() > 0
                         and self.actuator_pub.get_subscription_count() > 0
                         and all(s.get_publisher_count() > 0 for s in self.probe._subs
-                                if s.topic_name != '/clock'),
+                                if s.topic_name != contract.CLOCK.name),
                         self.timeout if timeout is None else timeout, self.executor)
 
     def wait(self, condition: Callable[[], bool], what: Union[str, Callable[[], str]],
@@ -134,7 +139,7 @@ class Driver:
     def outages(self) -> str:
         """Name the active stream outages as the latest ``faults`` message states them."""
         timeline = self._edges.timeline
-        timeline.update(self.probe.received['faults'])
+        timeline.update(self.probe.received[contract.FAULTS.name])
         return timeline.describe()
 
     def call(self, client: Any, request: Any) -> Any:
@@ -164,7 +169,7 @@ class Driver:
         silenced by a ``stream_outage`` fault (as the latest fault state says)."""
         received = self.probe.received
         silent = self.silenced()
-        topics = EVERY_STEP + (('density',) if self.density_per_step else ())
+        topics = EVERY_STEP + ((contract.DENSITY.name,) if self.density_per_step else ())
         # each stream comes from one writer, in order: its latest message is its newest step
         return [t for t in topics if t not in silent
                 and (not received[t] or cdr.stamp_of(received[t][-1]) < want_ns)]
@@ -177,7 +182,7 @@ class Driver:
     def fault_state(self) -> Optional[FaultStateData]:
         """Return the latest ``faults`` message received, decoded (None before the first;
         decoded once per message, not on every poll of a wait)."""
-        messages = self.probe.received['faults']
+        messages = self.probe.received[contract.FAULTS.name]
         if not messages:
             return None
         if self._fault_state[0] is not messages[-1]:
@@ -219,12 +224,12 @@ class Driver:
         received = self.probe.received
 
         def sent() -> int:
-            return len(received['belt_command']) + len(received['actuator_command'])
+            return sum(len(received[t.name]) for t in contract.COMMANDS)
 
         while True:
             self.drain()
             seen = sent()
-            self.wait(lambda: len(received['command_status']) >= seen,
+            self.wait(lambda: len(received[contract.COMMAND_STATUS.name]) >= seen,
                       'answers on command_status to the commands sent')
             self.drain()
             if sent() == seen:
@@ -252,7 +257,7 @@ class Driver:
             publisher = self.actuator_pub
             what = f'actuator_command {msg.actuator!r} = {msg.position!r}'
         key = (msg.sender, msg.sequence)
-        statuses = self.probe.received['command_status']
+        statuses = self.probe.received[contract.COMMAND_STATUS.name]
         seen = len(statuses)
         found: List[CommandResult] = []
 
@@ -284,15 +289,16 @@ class Driver:
         """Return the light-barrier edges published up to the latest barrier state received:
         the edges counted in steps when ``light_barrier_edges`` was not silenced."""
         received = self.probe.received
-        return self._edges.expected(received['light_barriers'], received['faults'])
+        return self._edges.expected(received[contract.LIGHT_BARRIERS.name],
+                                    received[contract.FAULTS.name])
 
     def settle_edges(self) -> None:
         """Wait until every edge counted in the last barrier state and published (not
         silenced by a ``stream_outage``) has arrived."""
         received = self.probe.received
-        if not received['light_barriers']:
+        if not received[contract.LIGHT_BARRIERS.name]:
             return
-        edges = received['light_barrier_edges']
+        edges = received[contract.LIGHT_BARRIER_EDGES.name]
         self.wait(lambda: len(edges) >= self.expected_edges(),
                   lambda: f'{self.expected_edges()} light-barrier edges counted and published '
                           f'({len(edges)} arrived)')

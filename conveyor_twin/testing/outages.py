@@ -10,10 +10,11 @@ keeps every such statement, so the harness knows which streams were silent at an
 import bisect
 from typing import Dict, FrozenSet, List, Sequence, Tuple
 
+from conveyor_twin.contract import LIGHT_BARRIER_EDGES
 from conveyor_twin.wire import cdr
-from conveyor_twin.wire.fault_state import decode_fault_state
+from conveyor_twin.wire.decoders import decode_fault_state
 
-EDGES = 'light_barrier_edges'
+EDGES = LIGHT_BARRIER_EDGES.name
 
 
 class OutageTimeline:

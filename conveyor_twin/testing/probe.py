@@ -1,36 +1,22 @@
 """A probe node that listens to the twin like a user's controller does (raw CDR, contract QoS)."""
 
 import hashlib
-import importlib
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence
 
 from rclpy.context import Context
 from rclpy.node import Node
 
-from conveyor_twin.ros.qos import CLOCK_QOS, COMMAND_QOS, EDGE_QOS, LATCHED_QOS, STREAM_QOS
+from conveyor_twin import contract
+from conveyor_twin.contract import Topic
+from conveyor_twin.ros.endpoints import create_subscription
 
-#: The twin's streams a probe listens to by default: ``{topic: (module, type, QoS)}``.
-STREAMS = {
-    'parts': ('conveyor_twin_msgs.msg', 'PartStates', STREAM_QOS),
-    'density': ('conveyor_twin_msgs.msg', 'DensityGrid', STREAM_QOS),
-    'light_barriers': ('conveyor_twin_msgs.msg', 'LightBarrierStates', STREAM_QOS),
-    'light_barrier_edges': ('conveyor_twin_msgs.msg', 'LightBarrierEdge', EDGE_QOS),
-    'belt_states': ('conveyor_twin_msgs.msg', 'BeltStates', STREAM_QOS),
-    'actuator_states': ('conveyor_twin_msgs.msg', 'ActuatorStates', STREAM_QOS),
-    '/clock': ('rosgraph_msgs.msg', 'Clock', CLOCK_QOS),
-    'faults': ('conveyor_twin_msgs.msg', 'FaultState', LATCHED_QOS),
-}
+#: The twin's streams a probe listens to by default (all but ``diagnostics`` and ``markers``):
+#: ``{topic name: contract entry}``.
+STREAMS: Dict[str, Topic] = {t.name: t for t in contract.STREAMS
+                             if t not in (contract.DIAGNOSTICS, contract.MARKERS)}
 #: More topics a probe can listen to: the twin's answer to each command, and the commands of
 #: every controller.
-COMMAND_TOPICS = {
-    'command_status': ('diagnostic_msgs.msg', 'DiagnosticStatus', STREAM_QOS),
-    'belt_command': ('conveyor_twin_msgs.msg', 'BeltCommand', COMMAND_QOS),
-    'actuator_command': ('conveyor_twin_msgs.msg', 'ActuatorCommand', COMMAND_QOS),
-}
-
-
-def _type(module: str, name: str) -> Any:
-    return getattr(importlib.import_module(module), name)
+COMMAND_TOPICS: Dict[str, Topic] = {t.name: t for t in contract.REPLIES + contract.COMMANDS}
 
 
 class Probe(Node):
@@ -47,10 +33,9 @@ class Probe(Node):
         self.received: Dict[str, List[bytes]] = {t: [] for t in topics}
         self._subs = []
         for topic in topics:
-            module, type_name, qos = {**STREAMS, **COMMAND_TOPICS}[topic]
-            self._subs.append(self.create_subscription(
-                _type(module, type_name), topic,
-                lambda data, t=topic: self.received[t].append(data), qos, raw=True))
+            self._subs.append(create_subscription(
+                self, {**STREAMS, **COMMAND_TOPICS}[topic],
+                lambda data, t=topic: self.received[t].append(data), raw=True))
 
     def matched(self, topics: Optional[Sequence[str]] = None) -> bool:
         """True once every listened topic (or those given) has a publisher."""

@@ -7,10 +7,11 @@ from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 from rclpy.serialization import deserialize_message
 
-from conveyor_twin.cell.model import Cell
+from conveyor_twin import contract
 from conveyor_twin.testing import checks
 from conveyor_twin.testing._layout import density_per_step
 from conveyor_twin.testing.driver import command_origin, command_result
+from conveyor_twin.testing.lifecycle import TwinLifecycle
 from conveyor_twin.testing.states import (ActuatorState, BarrierState, BeltSample, BeltState,
                                           CommandRecord, Edge)
 from conveyor_twin.wire import cdr
@@ -19,26 +20,32 @@ PartStates = cdr.PartStatesData
 DensityGrid = cdr.DensityGridData
 
 
-class StreamReader:
-    """The reading half of :class:`~conveyor_twin.testing.LockstepTwin` (a mixin): every
-    method reads what the harness's probe received, never the twin's internals."""
-
-    cell: Cell
-    step_s: float
-    step_index: int
-    _closed: bool
+class StreamReader(TwinLifecycle):
+    """The reading part of :class:`~conveyor_twin.testing.LockstepTwin`: every method reads
+    what the harness's probe received, never the twin's internals."""
 
     @property
     def time(self) -> float:
         """Simulation time of the last step [s]."""
-        raise NotImplementedError
+        return self.time_ns * 1e-9
 
     def _received(self, topic: str) -> List[bytes]:
-        raise NotImplementedError
+        return self._check_open(f'reading {topic}').probe.received[topic]
+
+    def messages(self, topic: str) -> List[bytes]:
+        """Every message received on a stream since the start or the last reset, as CDR bytes
+        (``parts``, ``density``, ``light_barriers``, ``light_barrier_edges``, ``belt_states``,
+        ``actuator_states``, ``/clock``, ``command_status``)."""
+        return self._received(topic)
+
+    def digest(self, topic: str) -> str:
+        """SHA-256 of every message received on ``topic`` (same seed and commands: same)."""
+        self._check_open('digest()')
+        return self._driver.probe.digest(topic)
 
     def belts(self) -> Dict[str, BeltState]:
         """Latest ``belt_states``: ``{belt: BeltState}`` (empty before the first step)."""
-        data = self._received('belt_states')
+        data = self._received(contract.BELT_STATES.name)
         if not data:
             return {}
         msg = deserialize_message(data[-1], BeltStates)
@@ -51,7 +58,7 @@ class StreamReader:
     def belt_history(self, name: str) -> List[BeltSample]:
         """Every ``belt_states`` entry of one belt received so far, oldest first."""
         out = []
-        for data in self._received('belt_states'):
+        for data in self._received(contract.BELT_STATES.name):
             msg = deserialize_message(data, BeltStates)
             if name not in msg.name:
                 raise KeyError(f'unknown belt {name!r} (known: {", ".join(msg.name)})')
@@ -61,7 +68,7 @@ class StreamReader:
 
     def actuators(self) -> Dict[str, ActuatorState]:
         """Latest ``actuator_states``: ``{actuator: ActuatorState}``."""
-        data = self._received('actuator_states')
+        data = self._received(contract.ACTUATOR_STATES.name)
         if not data:
             return {}
         msg = deserialize_message(data[-1], ActuatorStates)
@@ -74,7 +81,7 @@ class StreamReader:
 
     def barriers(self) -> Dict[str, BarrierState]:
         """Latest ``light_barriers``: ``{barrier: BarrierState}``."""
-        data = self._received('light_barriers')
+        data = self._received(contract.LIGHT_BARRIERS.name)
         if not data:
             return {}
         _, _, _, names, blocked, counts = cdr.decode_light_barrier_states(data[-1])
@@ -93,7 +100,7 @@ class StreamReader:
         checks.integer('since_step', since_step, 0)
         step_ns = round(self.step_s * 1e9)
         out = []
-        for data in self._received('light_barrier_edges'):
+        for data in self._received(contract.LIGHT_BARRIER_EDGES.name):
             msg = deserialize_message(data, LightBarrierEdge)
             t = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
             step = -(-t // step_ns)
@@ -103,7 +110,7 @@ class StreamReader:
 
     def parts(self) -> PartStates:
         """Latest ``parts``: ids, types, poses and velocities as numpy arrays (SI units)."""
-        data = self._received('parts')
+        data = self._received(contract.PARTS.name)
         if not data:
             empty = np.zeros(0)
             return PartStates(0, self.cell.settings.frame_id, 0, empty.astype(np.uint32),
@@ -124,7 +131,7 @@ class StreamReader:
     def densities(self) -> Dict[str, DensityGrid]:
         """Latest ``density`` of every macro zone: ``{zone: grid}``, density shape (ny, nx)."""
         out: Dict[str, DensityGrid] = {}
-        data = self._received('density')
+        data = self._received(contract.DENSITY.name)
         for raw in data[-max(1, density_per_step(self.cell)):]:
             grid = cdr.decode_density_grid(raw)
             out[grid.zone] = grid
@@ -133,7 +140,7 @@ class StreamReader:
     def command_log(self) -> List[CommandRecord]:
         """Every command the twin answered so far (the harness's and every controller's)."""
         out = []
-        for data in self._received('command_status'):
+        for data in self._received(contract.COMMAND_STATUS.name):
             status = deserialize_message(data, DiagnosticStatus)
             values = {kv.key: kv.value for kv in status.values}
             sender, sequence = command_origin(status)
@@ -155,7 +162,7 @@ class StreamReader:
         return (f'step {self.step_index} (t = {self.time:.3f} s); belts (actual/commanded): '
                 f'{belts or "-"}; actuators: {actuators or "-"}; blocked barriers: '
                 f'{", ".join(blocked) or "none"}; {len(self.parts().id)} micro parts; '
-                f'{len(self._received("light_barrier_edges"))} edges; '
+                f'{len(self._received(contract.LIGHT_BARRIER_EDGES.name))} edges; '
                 f'{len(rejected)} rejected commands' + (f' (last: {rejected[-1]})'
                                                         if rejected else ''))
 

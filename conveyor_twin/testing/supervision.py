@@ -12,6 +12,7 @@ from pathlib import Path
 import subprocess
 from typing import List, Mapping, Optional, Sequence
 
+from conveyor_twin import contract
 from conveyor_twin.health import BackgroundFailure, Health
 from conveyor_twin.testing._layout import log_tail, RunningLayout
 from conveyor_twin.testing.driver import command_origin, Driver
@@ -159,7 +160,7 @@ class Supervisor:
 
 def _answered(driver: Driver, sender: str, sequence: int) -> bool:
     """True once ``command_status`` holds the answer to (sender, sequence) or a later one."""
-    for data in reversed(driver.probe.received['command_status']):
+    for data in reversed(driver.probe.received[contract.COMMAND_STATUS.name]):
         who, number = command_origin(deserialize_message(data, DiagnosticStatus))
         if who == sender and number >= sequence:
             return True

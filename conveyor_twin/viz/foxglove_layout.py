@@ -13,6 +13,7 @@ import re
 from typing import Dict, List, Set
 
 from conveyor_twin.cell.model import Cell
+from conveyor_twin.contract import BELT_COMMAND, BELT_STATES, DIAGNOSTICS, LIGHT_BARRIERS
 from conveyor_twin.record import topics as contract
 from conveyor_twin.viz.foxglove_view import DENSITY_GRID_TOPIC, SCENE_TOPIC, density_zones
 
@@ -44,7 +45,7 @@ def _scene_topics(cell: Cell, namespace: str) -> Dict[str, dict]:
 
 
 def _belt_paths(cell: Cell, namespace: str, prefix: str = '') -> List[dict]:
-    topic = contract.resolve('belt_states', namespace)
+    topic = contract.resolve(BELT_STATES.name, namespace)
     paths = []
     for i, belt in enumerate(cell.belts):
         for field, what in (('speed', 'speed'), ('commanded_speed', 'commanded')):
@@ -55,7 +56,7 @@ def _belt_paths(cell: Cell, namespace: str, prefix: str = '') -> List[dict]:
 
 
 def _barrier_paths(cell: Cell, namespace: str, prefix: str = '') -> List[dict]:
-    topic = contract.resolve('light_barriers', namespace)
+    topic = contract.resolve(LIGHT_BARRIERS.name, namespace)
     return [{'value': f'{topic}.blocked[{i}]', 'timestampMethod': 'receiveTime',
              'label': f'{prefix}{barrier.name}'}
             for i, barrier in enumerate(cell.light_barriers)]
@@ -63,8 +64,8 @@ def _barrier_paths(cell: Cell, namespace: str, prefix: str = '') -> List[dict]:
 
 def _publish_panel(cell: Cell, namespace: str) -> dict:
     belt = cell.belts[0].name if cell.belts else ''
-    return {'topicName': contract.resolve('belt_command', namespace),
-            'datatype': 'conveyor_twin_msgs/msg/BeltCommand', 'buttonText': 'Set belt speed',
+    return {'topicName': contract.resolve(BELT_COMMAND.name, namespace),
+            'datatype': BELT_COMMAND.type_name, 'buttonText': 'Set belt speed',
             'value': json.dumps({'belt': belt, 'speed': 1.0}, indent=2)}
 
 
@@ -86,7 +87,7 @@ def cell_layout(cell: Cell, namespace: str = '') -> dict:
         'Plot!belts': {'title': 'belt speeds [m/s]', 'paths': _belt_paths(cell, namespace),
                        'showLegend': True},
         'StateTransitions!barriers': {'paths': _barrier_paths(cell, namespace)},
-        'DiagnosticSummary!diag': {'topicToRender': contract.resolve('diagnostics', namespace),
+        'DiagnosticSummary!diag': {'topicToRender': contract.resolve(DIAGNOSTICS.name, namespace),
                                    'sortByLevel': True},
     }
     bottom = ['Plot!belts', 'StateTransitions!barriers', 'DiagnosticSummary!diag']

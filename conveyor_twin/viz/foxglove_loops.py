@@ -18,6 +18,7 @@ from typing import Callable, Deque, Dict, List, Optional, Tuple
 import numpy as np
 
 from conveyor_twin.cell.model import Cell
+from conveyor_twin.contract import ACTUATOR_STATES, LIGHT_BARRIERS, PARTS
 from conveyor_twin.health import Health
 from conveyor_twin.output.markers import CellMarkers
 from conveyor_twin.wire import cdr, schemas
@@ -40,19 +41,19 @@ def cell_scene(markers: CellMarkers, cell: Cell,
                latest: Dict[str, Tuple[int, bytes]]) -> Optional[Tuple[int, bytes]]:
     """(stamp [ns], MarkerArray CDR) of a cell's scene from the latest ``parts``,
     ``light_barriers`` and ``actuator_states`` messages; None before the first ``parts``."""
-    parts = latest.get('parts')
+    parts = latest.get(PARTS.name)
     if parts is None:
         return None
     stamp_ns, data = parts
     p = cdr.decode_part_states(data)
     blocked = np.zeros(len(cell.light_barriers), bool)
-    barriers = latest.get('light_barriers')
+    barriers = latest.get(LIGHT_BARRIERS.name)
     if barriers is not None:
         blocked = cdr.decode_light_barrier_states(barriers[1])[4]
     position = np.array([a.initial_position for a in cell.actuators])
-    actuators = latest.get('actuator_states')
+    actuators = latest.get(ACTUATOR_STATES.name)
     if actuators is not None:
-        from conveyor_twin.record.decode import decode_actuator_states
+        from conveyor_twin.wire.decoders import decode_actuator_states
         position = decode_actuator_states(actuators[1]).actual
     return stamp_ns, markers.build(stamp_ns, p.part_type, p.x, p.y, blocked, position)
 

@@ -20,22 +20,23 @@ import dataclasses
 import math
 from typing import Dict, List, Optional, Tuple
 
-from conveyor_twin import contract as streams_contract
+from conveyor_twin import contract
 from conveyor_twin.health import Health
 from conveyor_twin.output.markers import CellMarkers
-from conveyor_twin.record import topics as contract
+from conveyor_twin.record.topics import resolve
 from conveyor_twin.viz.foxglove_loops import cell_scene, ros_channel, ViewLoops
 from conveyor_twin.viz.foxglove_messages import density_grid
 from conveyor_twin.viz.foxglove_view import (DEFAULT_BACKLOG, DEFAULT_HOST, DEFAULT_PORT,
                                              DEFAULT_SCENE_RATE, DEFAULT_STREAM_RATE,
                                              DENSITY_GRID_TOPIC, EVERY_MESSAGE, INNER_HOST,
-                                             SCENE_TOPIC, density_zones,
+                                             SCENE_STREAMS, SCENE_TOPIC, density_zones,
                                              import_sdk, serve)
 from conveyor_twin.wire import cdr
 
-#: The streams of each cell the plant view serves (relative names).
-PLANT_STREAMS = ('parts', 'density', 'light_barriers', 'light_barrier_edges', 'belt_states',
-                 'actuator_states', 'diagnostics', 'faults')
+#: The streams of each cell the plant view serves (relative names): every stream of the
+#: frame but the clock (the plant's time is every cell's), in the contract's order.
+PLANT_STREAMS = tuple(t.name for t in contract.STREAMS
+                      if t in {s.topic for s in contract.FRAME} and t is not contract.CLOCK)
 TF_TOPIC = '/tf'
 PUBLISHER_FAILURE = 'foxglove plant view (publisher thread)'
 SCENE_FAILURE = 'foxglove plant view (scene thread)'
@@ -52,9 +53,9 @@ def plant_topics(plant) -> List[str]:
     topics = [TF_TOPIC]
     for c in plant.cells:
         ns = '/' + c.namespace
-        topics += [contract.resolve(name, ns) for name in PLANT_STREAMS]
-        topics.append(contract.resolve(SCENE_TOPIC, ns))
-        topics += [contract.resolve(f'{DENSITY_GRID_TOPIC}/{z}', ns)
+        topics += [resolve(name, ns) for name in PLANT_STREAMS]
+        topics.append(resolve(SCENE_TOPIC, ns))
+        topics += [resolve(f'{DENSITY_GRID_TOPIC}/{z}', ns)
                    for z in density_zones(c.cell)]
     return topics
 
@@ -97,7 +98,7 @@ class PlantView(ViewLoops):
         self.streams: Dict[str, Tuple[_CellScene, str, int]] = {}
         for scene in self.cells:
             for name in PLANT_STREAMS:
-                self.streams[contract.resolve(name, scene.namespace)] = (
+                self.streams[resolve(name, scene.namespace)] = (
                     scene, name, 1 if name in EVERY_MESSAGE else every)
         self._count = {topic: 0 for topic in self.streams}
         self.channels: Dict[str, object] = {}
@@ -113,9 +114,9 @@ class PlantView(ViewLoops):
         self._count[topic] = n + 1
         if n % every:
             return
-        if rel == 'density':
+        if rel == contract.DENSITY.name:
             scene.density[cdr.decode_density_grid(data).zone] = (stamp_ns, data)
-        elif rel in ('parts', 'light_barriers', 'actuator_states'):
+        elif rel in SCENE_STREAMS:
             scene.latest[rel] = (stamp_ns, data)
         self._enqueue(topic, stamp_ns, data)
 
@@ -129,17 +130,17 @@ class PlantView(ViewLoops):
         from foxglove.channels import FrameTransformsChannel, GridChannel
         from foxglove.websocket import Capability
         context = self._context = foxglove.Context()
-        types = {t.name: t.type_name for t in streams_contract.STREAMS}
+        types = {t.name: t.type_name for t in contract.STREAMS}
         for topic, (_, rel, _) in self.streams.items():
             self.channels[topic] = ros_channel(foxglove, context, topic, types[rel])
         self._grids: Dict[Tuple[str, str], object] = {}
         for scene in self.cells:
-            topic = contract.resolve(SCENE_TOPIC, scene.namespace)
+            topic = resolve(SCENE_TOPIC, scene.namespace)
             self.channels[topic] = ros_channel(foxglove, context, topic,
                                                 'visualization_msgs/msg/MarkerArray')
             for zone in density_zones(scene.cell):
                 self._grids[scene.name, zone] = GridChannel(
-                    contract.resolve(f'{DENSITY_GRID_TOPIC}/{zone}', scene.namespace),
+                    resolve(f'{DENSITY_GRID_TOPIC}/{zone}', scene.namespace),
                     context=context)
         self._tf = FrameTransformsChannel(TF_TOPIC, context=context)
         self.server, self.proxy = serve(lambda: foxglove.start_server(
@@ -160,7 +161,7 @@ class PlantView(ViewLoops):
                 continue
             stamp_ns, markers = drawn
             stamps.append(stamp_ns)
-            self.channels[contract.resolve(SCENE_TOPIC, scene.namespace)].log(
+            self.channels[resolve(SCENE_TOPIC, scene.namespace)].log(
                 markers, log_time=stamp_ns)
             for zone, (t_ns, grid_bytes) in list(scene.density.items()):
                 channel = self._grids.get((scene.name, zone))

@@ -31,15 +31,17 @@ No rclpy here: the ROS side (:mod:`conveyor_twin.ros.foxglove_bridge`) supplies 
 """
 
 from dataclasses import dataclass
+from operator import attrgetter
 import socket
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
-from conveyor_twin import contract as streams_contract
+from conveyor_twin import contract
 from conveyor_twin.cell.model import Cell
+from conveyor_twin.contract import Shape
 from conveyor_twin.health import Health
 from conveyor_twin.output.frame import Frame
 from conveyor_twin.output.markers import CellMarkers
-from conveyor_twin.record import topics as contract
+from conveyor_twin.record.topics import relative, resolve
 from conveyor_twin.viz.foxglove_loops import cell_scene, ros_channel, ViewLoops
 from conveyor_twin.viz.foxglove_messages import CommandParseError, decode_command, density_grid
 from conveyor_twin.wire import cdr
@@ -56,11 +58,14 @@ DEFAULT_BACKLOG = 1024
 INNER_HOST = '127.0.0.1'
 SCENE_TOPIC = 'scene'
 DENSITY_GRID_TOPIC = 'scene/density'
-#: Streams sent every message (events and slow streams); the others at ``stream_rate``.
-EVERY_MESSAGE = frozenset(('light_barrier_edges', 'diagnostics', 'markers', 'faults'))
+#: Streams sent every message (events and slow streams); the others (emitted every step) at
+#: ``stream_rate``.
+EVERY_MESSAGE = frozenset(t.name for t in contract.STREAMS if t.rate is not contract.Rate.STEP)
 #: Streams whose latest message the scene is drawn from.
-SCENE_STREAMS = frozenset(('parts', 'light_barriers', 'actuator_states'))
-COMMAND_TOPICS = {'belt_command': 'belt', 'actuator_command': 'actuator'}
+SCENE_STREAMS = frozenset(t.name for t in (contract.PARTS, contract.LIGHT_BARRIERS,
+                                           contract.ACTUATOR_STATES))
+#: Topics clients may publish, and the command kind of each.
+COMMAND_TOPICS = {contract.BELT_COMMAND.name: 'belt', contract.ACTUATOR_COMMAND.name: 'actuator'}
 #: Names the view's failures are reported under in the twin's :class:`Health`.
 PUBLISHER_FAILURE = 'foxglove view (publisher thread)'
 SCENE_FAILURE = 'foxglove view (scene thread)'
@@ -149,9 +154,9 @@ def density_zones(cell: Cell) -> List[str]:
 def served_topics(cell: Cell, namespace: str = '') -> List[str]:
     """Every topic the view of ``cell`` under ``namespace`` serves: the contract streams, the
     scene and one density grid per macro zone (absolute names)."""
-    topics = [contract.resolve(topic.name, namespace) for topic in streams_contract.STREAMS]
-    topics.append(contract.resolve(SCENE_TOPIC, namespace))
-    topics += [contract.resolve(f'{DENSITY_GRID_TOPIC}/{zone}', namespace)
+    topics = [resolve(topic.name, namespace) for topic in contract.STREAMS]
+    topics.append(resolve(SCENE_TOPIC, namespace))
+    topics += [resolve(f'{DENSITY_GRID_TOPIC}/{zone}', namespace)
                for zone in density_zones(cell)]
     return topics
 
@@ -190,14 +195,19 @@ class FoxgloveView(ViewLoops):
         #: Frames forwarded whole: one in ``every`` [1].
         self.every = every
         self._frames = 0
-        self._names = {topic: contract.resolve(topic.name, namespace)
-                       for topic in streams_contract.STREAMS}
-        self._every = {topic: 1 if contract.relative(topic, namespace) in EVERY_MESSAGE
+        self._names = {topic: resolve(topic.name, namespace)
+                       for topic in contract.STREAMS}
+        #: (absolute topic, frame attribute getter, shape) of the frame's streams sent every
+        #: message, in frame order.
+        self._every_message = tuple(
+            (self._names[s.topic], attrgetter(s.attribute), s.shape) for s in contract.FRAME
+            if s.topic.name in EVERY_MESSAGE)
+        self._every = {topic: 1 if relative(topic, namespace) in EVERY_MESSAGE
                        else every for topic in self.streams}
         self._count = {topic: 0 for topic in self.streams}
         self._latest: Dict[str, Tuple[int, bytes]] = {}
         self._density: Dict[str, Tuple[int, bytes]] = {}
-        self._rel = {topic: contract.relative(topic, namespace) for topic in self.streams}
+        self._rel = {topic: relative(topic, namespace) for topic in self.streams}
         self.rejected = 0            # client messages refused (invalid command, bad payload)
         self.last_rejection = ''
         #: Called with the reason of a client message that is no command at all (undecodable,
@@ -216,21 +226,26 @@ class FoxgloveView(ViewLoops):
         """
         n = self._frames
         self._frames = n + 1
-        names = self._names
         if n % self.every:
-            for stamp, data in frame.edges:
-                self._enqueue(names[streams_contract.LIGHT_BARRIER_EDGES], stamp, data)
-            if frame.diagnostics is not None:
-                self._enqueue(names[streams_contract.DIAGNOSTICS], frame.time_ns,
-                              frame.diagnostics)
-            if frame.faults is not None:
-                self._enqueue(names[streams_contract.FAULTS], frame.time_ns, frame.faults)
+            t = frame.time_ns
+            for name, get, shape in self._every_message:
+                value = get(frame)
+                if shape is Shape.ONE:
+                    if value is not None:
+                        self._enqueue(name, t, value)
+                elif shape is Shape.STAMPED:
+                    for stamp, data in value:
+                        self._enqueue(name, stamp, data)
+                else:
+                    for data in value:
+                        self._enqueue(name, t, data)
             return
+        names = self._names
         for topic, stamp_ns, data in frame.messages():
             self._keep(topic.name, stamp_ns, data)
             self._enqueue(names[topic], stamp_ns, data)
 
-    def on_message(self, topic: streams_contract.Topic, stamp_ns: int, data: bytes) -> None:
+    def on_message(self, topic: contract.Topic, stamp_ns: int, data: bytes) -> None:
         """Take a message emitted off the step (``markers``)."""
         name = self._names.get(topic)
         if name is not None and self.active:
@@ -258,7 +273,7 @@ class FoxgloveView(ViewLoops):
 
     def _keep(self, rel: str, stamp_ns: int, data: bytes) -> None:
         """Keep the latest message of the streams the scene is drawn from."""
-        if rel == 'density':
+        if rel == contract.DENSITY.name:
             self._density[_density_zone(data)] = (stamp_ns, data)
         elif rel in SCENE_STREAMS:
             self._latest[rel] = (stamp_ns, data)
@@ -274,12 +289,12 @@ class FoxgloveView(ViewLoops):
         context = self._context = foxglove.Context()  # the channels live as long as it
         for topic, type_name in self.streams.items():
             self.channels[topic] = ros_channel(foxglove, context, topic, type_name)
-        scene = contract.resolve(SCENE_TOPIC, self.namespace)
+        scene = resolve(SCENE_TOPIC, self.namespace)
         self.channels[scene] = ros_channel(foxglove, context, scene,
                                              'visualization_msgs/msg/MarkerArray')
         from foxglove.channels import GridChannel
         self._grid_channels = {
-            zone: GridChannel(contract.resolve(f'{DENSITY_GRID_TOPIC}/{zone}', self.namespace),
+            zone: GridChannel(resolve(f'{DENSITY_GRID_TOPIC}/{zone}', self.namespace),
                               context=context)
             for zone in density_zones(self.cell)}
         self.server, self.proxy = serve(lambda: foxglove.start_server(
@@ -302,7 +317,7 @@ class FoxgloveView(ViewLoops):
         def handler(request) -> bytes:
             return spec.handler(bytes(request.payload))
 
-        return Service(contract.resolve(spec.name, self.namespace), schema=ServiceSchema(
+        return Service(resolve(spec.name, self.namespace), schema=ServiceSchema(
             spec.type_name, request=message_schema('Request', spec.request_text),
             response=message_schema('Response', spec.response_text)), handler=handler)
 
@@ -312,7 +327,7 @@ class FoxgloveView(ViewLoops):
         if scene is None:
             return
         stamp_ns, markers = scene
-        self.channels[contract.resolve(SCENE_TOPIC, self.namespace)].log(markers,
+        self.channels[resolve(SCENE_TOPIC, self.namespace)].log(markers,
                                                                         log_time=stamp_ns)
         for zone, (t_ns, grid_bytes) in list(self._density.items()):
             channel = self._grid_channels.get(zone)
@@ -326,7 +341,7 @@ class FoxgloveView(ViewLoops):
         self._frames = 0
 
     def _advertised(self, key: Tuple[int, int], topic: str, encoding: str) -> None:
-        self._client_channels[key] = (contract.relative(topic, self.namespace), encoding)
+        self._client_channels[key] = (relative(topic, self.namespace), encoding)
 
     def _unadvertised(self, key: Tuple[int, int]) -> None:
         self._client_channels.pop(key, None)
@@ -340,7 +355,7 @@ class FoxgloveView(ViewLoops):
         kind = COMMAND_TOPICS.get(topic.lstrip('/'))
         if kind is None:
             return self._invalid(f'{topic or "an unadvertised channel"}: clients may publish '
-                                 'only belt_command and actuator_command')
+                                 f'only {" and ".join(COMMAND_TOPICS)}')
         try:
             name, value = decode_command(kind, encoding, data)
         except CommandParseError as exc:
@@ -372,7 +387,7 @@ class FoxgloveView(ViewLoops):
 
 
 def _density_zone(data: bytes) -> str:
-    from conveyor_twin.record.series import _density_zone as zone_of
+    from conveyor_twin.wire.decoders import density_zone as zone_of
     return zone_of(data)
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from conveyor_twin.cell import CellError, load_cell_text
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.record import reader
-from conveyor_twin.record.decode import decode_actuator_states, decode_belt_states
+from conveyor_twin.wire.decoders import decode_actuator_states, decode_belt_states
 from conveyor_twin.record.errors import RecordingError
 from conveyor_twin.record.series import ACTUATORS, BARRIERS, BELTS, DENSITY, PARTS
 from conveyor_twin.wire import cdr
@@ -170,5 +170,4 @@ def _append(series: Timeline, t: float, names: Tuple[str, ...], values: np.ndarr
 
 
 def _zone_key(data: bytes) -> str:
-    from conveyor_twin.record.series import _density_zone
-    return _density_zone(data)
+    return cdr.density_zone(data)

@@ -7,13 +7,14 @@ writes the same bytes as rmw_fastrtps (``serialize_message``) in a few tens of m
 
 A status is a :class:`Status` or anything with the same attributes (a
 ``diagnostic_msgs/DiagnosticStatus`` message object, whose ``values`` hold ``KeyValue``
-objects); the values of a :class:`Status` are ``(key, value)`` pairs.
+objects); the values of a :class:`Status` are ``(key, value)`` pairs. The decoder is
+:func:`conveyor_twin.wire.decoders.decode_diagnostic_array`.
 """
 
 import struct
 from typing import Any, Dict, List, NamedTuple, Sequence, Tuple, Union
 
-from conveyor_twin.wire.cdr import _Reader, CdrError, ENCAPSULATION_LE, stamp_parts
+from conveyor_twin.wire.builder import CdrError, ENCAPSULATION_LE, stamp_parts
 
 # diagnostic_msgs/DiagnosticStatus levels [byte]
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
@@ -98,21 +99,3 @@ def encode_diagnostic_array(stamp_ns: int, frame_id: str, statuses: Sequence[Any
         out.append(data)
         pos += len(data)
     return b''.join(out)
-
-
-def decode_diagnostic_array(data: bytes) -> Tuple[int, str, Tuple[Status, ...]]:
-    """Decode DiagnosticArray CDR bytes.
-
-    :return: ``(stamp [ns], frame_id, statuses)``.
-    :raises CdrError: on malformed data.
-    """
-    r = _Reader(data, 'DiagnosticArray')
-    stamp_ns = r.stamp_ns()
-    frame_id = r.string()
-    statuses = []
-    for _ in range(r.scalar('I')):
-        level = r.scalar('B')
-        name, message, hardware_id = r.string(), r.string(), r.string()
-        values = tuple((r.string(), r.string()) for _ in range(r.scalar('I')))
-        statuses.append(Status(level, name, message, hardware_id, values))
-    return stamp_ns, frame_id, tuple(statuses)

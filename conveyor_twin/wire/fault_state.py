@@ -1,10 +1,11 @@
-"""CDR of ``conveyor_twin_msgs/FaultState``: the active faults, sent when they change."""
+"""CDR of ``conveyor_twin_msgs/FaultState``: the active faults, sent when they change.
 
-from typing import List, NamedTuple, Sequence, Tuple
+The decoder is :func:`conveyor_twin.wire.decoders.decode_fault_state`.
+"""
 
-import numpy as np
+from typing import NamedTuple, Sequence, Tuple
 
-from conveyor_twin.wire.cdr import _Builder, _Reader
+from conveyor_twin.wire.builder import CdrBuilder
 
 
 class FaultEntry(NamedTuple):
@@ -40,7 +41,7 @@ def encode_fault_state(stamp_ns: int, frame_id: str, active: Sequence[FaultEntry
     :param stamp_ns: simulation time from which the set is in effect [ns].
     :param cleared: (id, reason) of the faults cleared at this stamp.
     """
-    b = _Builder()
+    b = CdrBuilder()
     b.stamp(stamp_ns)
     b.string(frame_id)
 
@@ -69,36 +70,3 @@ def encode_fault_state(stamp_ns: int, frame_id: str, active: Sequence[FaultEntry
     b.u32(total_injected)
     b.u32(total_rejected)
     return b.message()
-
-
-def decode_fault_state(data: bytes) -> FaultStateData:
-    """Decode a FaultState message.
-
-    :raises CdrError: on malformed data.
-    """
-    r = _Reader(data, 'FaultState')
-    stamp_ns = r.stamp_ns()
-    frame_id = r.string()
-
-    def strings() -> List[str]:
-        return [r.string() for _ in range(r.scalar('I'))]
-
-    ids = r.array('u4')
-    kinds, targets = strings(), strings()
-    counts = r.array('u4')
-    names = strings()
-    values = r.array('f8')
-    part_types = strings()
-    durations, since = r.array('f8'), r.array('f8')
-    injected, cleared = r.array('u4'), r.array('u4')
-    reasons = strings()
-    total_injected, total_rejected = r.scalar('I'), r.scalar('I')
-    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(int)
-    active = tuple(FaultEntry(int(ids[i]), kinds[i], targets[i],
-                              tuple((names[k], float(values[k]))
-                                    for k in range(offsets[i], offsets[i + 1])),
-                              part_types[i], float(durations[i]), float(since[i]))
-                   for i in range(len(ids)))
-    return FaultStateData(stamp_ns, frame_id, active, tuple(int(i) for i in injected),
-                          tuple(int(i) for i in cleared), tuple(reasons), total_injected,
-                          total_rejected)

@@ -18,7 +18,7 @@ import yaml
 from conveyor_twin.cell import load_cell
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.wire import cdr
-from conveyor_twin.wire.fault_state import decode_fault_state
+from conveyor_twin.wire.decoders import decode_fault_state
 
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = Path(ROOT, 'conveyor_twin', 'cell')

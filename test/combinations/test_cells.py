@@ -52,7 +52,7 @@ def recording(case, scenario):
 
 def test_every_fault_family_takes_effect(run):
     """The faults stream states each fault active from its step, and its end."""
-    from conveyor_twin.wire.fault_state import decode_fault_state
+    from conveyor_twin.wire.decoders import decode_fault_state
     states = [decode_fault_state(d) for d in run.ros['faults']]
     seen = {f.kind: s.stamp_ns // run.step_ns for s in reversed(states) for f in s.active}
     wanted = {e['kind']: e['at']['step'] for e in matrix.fault_entries(run.case)}
@@ -64,7 +64,7 @@ def test_the_faults_show_in_the_streams(run):
     """The belt stalls (actual speed 0 while stalled, ramping up after), the belt command takes
     effect after the commands' delay, the chattering barrier reports an edge every half period
     (where its edges are not silenced)."""
-    from conveyor_twin.record.decode import decode_belt_states, decode_light_barrier_edge
+    from conveyor_twin.wire.decoders import decode_belt_states, decode_light_barrier_edge
     faults = {e['kind']: e for e in matrix.fault_entries(run.case)}
     belts = {cdr.stamp_of(d) // run.step_ns: decode_belt_states(d)
              for d in run.ros['belt_states']}

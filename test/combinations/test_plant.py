@@ -19,7 +19,7 @@ import pytest
 from conveyor_twin.plant.loader import load_plant
 from conveyor_twin.testing import ros_subprocess_env
 from conveyor_twin.wire import cdr
-from conveyor_twin.wire.fault_state import decode_fault_state
+from conveyor_twin.wire.decoders import decode_fault_state
 
 from . import matrix
 from .foxglove_client import FoxgloveClient
@@ -160,7 +160,7 @@ class _FaultInjector:
 
     def all_expired(self, counts: dict) -> bool:
         """True once each cell's latest fault state counts its injected faults, none active."""
-        from conveyor_twin.wire.fault_state import decode_fault_state
+        from conveyor_twin.wire.decoders import decode_fault_state
         for cell, count in counts.items():
             if not self.states[cell]:
                 return False

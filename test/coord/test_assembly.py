@@ -1,4 +1,4 @@
-"""One assembly for every layout: what :func:`build_twin` wires, and what it refuses."""
+"""The composed assembly: what :func:`build_twin` wires (the split roles: test/split)."""
 
 import numpy as np
 import pytest
@@ -7,10 +7,9 @@ import yaml
 from conveyor_twin.cell import load_cell
 from conveyor_twin.cell.loader import cell_from_mapping, default_cell_text
 from conveyor_twin.coord.assembly import build_twin
-from conveyor_twin.coord.codec import MACRO_ROLE, MICRO_ROLE
 from conveyor_twin.coord.requests import check_spawn
-from conveyor_twin.coord.scale import ScaleCoupling
 from conveyor_twin.coord.stages import MacroStage, MicroStage
+from conveyor_twin.coupling.scale import ScaleCoupling
 
 MID_MACRO = [{'name': 'up', 'policy': 'micro', 'region': [0.0, -0.25, 1.5, 0.25]},
              {'name': 'mid', 'policy': 'macro', 'region': [1.5, -0.25, 2.5, 0.25]},
@@ -34,7 +33,6 @@ def test_composed_steps_micro_macro_then_the_coupling_built_with_both() -> None:
     # the micro stage reads the barriers of macro zones from the holder the coupling fills
     assert micro.macro_barriers is coupling.zone_barriers
     assert not hasattr(micro, 'coupling') and not hasattr(macro, 'coupling')
-    assert built.remote_roles == ()
 
 
 def test_composed_publishes_the_barriers_of_macro_zones_from_the_density() -> None:
@@ -54,51 +52,18 @@ def test_macro_counters_carry_the_ledger_only_where_the_hand_over_runs() -> None
     assert abs(counters['balance_residual']) <= 1e-9 and counters['balance_entered'] > 0
     assert not any(k.startswith('balance_') for k in build_twin(load_cell(), seed=1)
                    .macro_counters())
-    assert not any(k.startswith('balance_')
-                   for k in build_twin(_macro_cell(), seed=1, layout='micro').micro_counters())
-    assert 'balance_residual' in build_twin(_macro_cell(), seed=1,
-                                            layout='macro').macro_counters()
+    assert not any(k.startswith('balance_') for k in coupled.micro_counters())
 
 
-def test_split_roles_hold_their_own_parts() -> None:
-    cell = _macro_cell()
-    coordinator = build_twin(cell, seed=2, layout='coordinator')
-    assert coordinator.twin.stages == [] and coordinator.micro is None
-    assert coordinator.remote_roles == (MICRO_ROLE, MACRO_ROLE)
-    micro = build_twin(cell, seed=2, layout='micro')
-    assert micro.twin is None and micro.macro is None
-    assert micro.micro.macro_barriers is micro.micro_side.barriers
-    macro = build_twin(cell, seed=2, layout='macro', check_balance=True)
-    assert macro.macro_side.coupling is macro.coupling and macro.coupling.check
-    plain = build_twin(load_cell(), seed=2, layout='micro')
-    assert plain.micro_side is None and plain.micro.macro_barriers is None
-    assert build_twin(load_cell(), seed=2, layout='macro').macro_side is None
-
-
-def test_reset_scales_restarts_a_role_and_forgets_remote_barriers() -> None:
-    micro = build_twin(_macro_cell(), seed=2, layout='micro')
-    micro.micro_side.barriers.load([(0, True, 3)], [(0, True, 0.5)])
-    assert micro.micro.barrier_blocked()[0]
-    micro.reset_scales(micro.cell, 9)
-    assert micro.seed == 9 and micro.micro_side.barriers.barriers == []
-    assert not micro.micro.barrier_blocked()[0]
-
-
-def test_spawn_places_a_checked_request_and_needs_a_micro_stage() -> None:
+def test_spawn_places_a_checked_request_and_the_part_check_sees_it() -> None:
     cell = load_cell()
     built = build_twin(cell, seed=1)
     request = check_spawn(cell, cell.part_types[0].name, [1.0], [0.0], [])
     ids = built.spawn(request)
     assert list(built.micro.parts()[0]) == list(ids)
-    with pytest.raises(ValueError, match='coordinator layout holds no micro stage'):
-        build_twin(cell, seed=1, layout='coordinator').spawn(request)
-    with pytest.raises(ValueError, match='only the composed layout'):
-        build_twin(cell, seed=1, layout='micro').step(1)
-
-
-def test_unknown_layout_is_named_with_the_allowed_ones() -> None:
-    with pytest.raises(ValueError, match="'split'.*composed, coordinator, micro, macro"):
-        build_twin(load_cell(), seed=1, layout='split')
+    assert built.holds_part(int(ids[0])) and not built.holds_part(int(ids[0]) + 1000)
+    with pytest.raises(ValueError, match='nothing placed'):
+        built.spawn(request)  # the same pose again overlaps the first part
 
 
 def test_reset_rebinds_the_coupling_and_its_barriers() -> None:

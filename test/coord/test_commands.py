@@ -7,7 +7,7 @@ import pytest
 from conveyor_twin.cell import load_cell
 from conveyor_twin.coord.actuation import Actuation
 from conveyor_twin.coord.clock import stamp, step_ns
-from conveyor_twin.coord.commands import CommandBook, CommandRejected
+from conveyor_twin.coord.commands import CommandBook, CommandKind, CommandRejected
 
 
 @pytest.fixture
@@ -54,6 +54,14 @@ def test_valid_commands_are_stamped_at_the_boundary_in_order(book: CommandBook) 
     assert [(c.kind, c.name, c.value, c.step) for c in drained] == [
         ('belt', 'main', 1.0, 7), ('actuator', 'pusher', 0.5, 7), ('belt', 'main', -2.0, 7)]
     assert book.drain(8) == []
+
+
+def test_command_kinds_are_members_equal_to_their_strings(book: CommandBook) -> None:
+    belt, actuator = book.validate_belt('main', 1.0), book.validate_actuator('pusher', 0.5)
+    assert belt.kind is CommandKind.BELT and actuator.kind is CommandKind.ACTUATOR
+    assert [f'{belt.kind}', str(actuator.kind)] == ['belt', 'actuator']
+    assert {'belt': 1, 'actuator': 2}[actuator.kind] == 2   # hashes as its string
+    assert CommandKind('actuator') is CommandKind.ACTUATOR
 
 
 def test_scheduled_commands_come_first_at_their_step(book: CommandBook) -> None:

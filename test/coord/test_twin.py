@@ -5,7 +5,7 @@ from typing import List
 import numpy as np
 
 from conveyor_twin.cell import load_cell
-from conveyor_twin.coord.codec import pack_step_input, unpack_step_input
+from conveyor_twin.split.protocol import pack_step_input, unpack_step_input
 from conveyor_twin.coord.runner import Runner
 from conveyor_twin.coord.step_input import StepInput
 from conveyor_twin.coord.timing import TimeMode

@@ -8,7 +8,7 @@ import pytest
 
 from conveyor_twin.record.resimulate import resimulate
 from conveyor_twin.testing import LockstepTwin, quiet_cell
-from conveyor_twin.wire.fault_state import decode_fault_state
+from conveyor_twin.wire.decoders import decode_fault_state
 
 pytestmark = pytest.mark.ros
 SCENARIO = '''

@@ -6,13 +6,12 @@ import numpy as np
 import pytest
 
 from conveyor_twin.cell import load_cell
-from conveyor_twin.coord import codec
 from conveyor_twin.coord.assembly import build_twin
 from conveyor_twin.faults.model import FaultRejected, FaultSpec
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.producers import CoordinatorOutput, MacroOutput, MicroOutput
-from conveyor_twin.wire import cdr
-from conveyor_twin.wire.fault_state import decode_fault_state
+from conveyor_twin.split import protocol
+from conveyor_twin.wire.decoders import decode_fault_state
 
 DT_NS = 1_000_000
 
@@ -35,7 +34,7 @@ class Recorder:
 
 
 def twin(seed: int = 1, cell=None):
-    a = build_twin(cell or load_cell(), seed=seed, layout='composed')
+    a = build_twin(cell or load_cell(), seed=seed)
     out = TwinOutput([CoordinatorOutput(a.twin), MicroOutput(a.micro), MacroOutput(a.macro)])
     a.twin.step_listeners.append(out.on_step)
     rec = Recorder(a.micro)
@@ -202,7 +201,6 @@ def test_jammed_part_stays_and_vanished_parts_are_counted():
 
 
 def test_source_surge_and_wrong_type():
-    cell = load_cell()
     base, _ = twin()
     base.step(3000)
     a, _ = twin()
@@ -250,9 +248,9 @@ def test_fault_events_travel_in_the_step_input_bytes():
                                    duration=1.0))
     a.twin.faults.inject(FaultSpec('part_jam', '', {'x': 0.5, 'y': 0.0}))
     inp = a.twin.prepare()
-    back = codec.unpack_step_input(codec.pack_step_input(inp))
+    back = protocol.unpack_step_input(protocol.pack_step_input(inp))
     assert back.faults == inp.faults and len(back.faults) == 2
-    assert codec.unpack_step_input(codec.pack_step_input(a.twin.prepare())).faults == ()
+    assert protocol.unpack_step_input(protocol.pack_step_input(a.twin.prepare())).faults == ()
 
 
 def test_clearing_a_stuck_barrier_reports_the_edge_back_to_the_truth():
@@ -270,7 +268,7 @@ def test_vanished_parts_keep_the_multi_scale_ledger_exact():
     from conveyor_twin.cell import load_cell as load
     from importlib import resources
     cell = load(str(resources.files('conveyor_twin.cell') / 'examples' / 'multiscale.yaml'))
-    a = build_twin(cell, seed=2, layout='composed', check_balance=True)  # checked every step
+    a = build_twin(cell, seed=2, check_balance=True)  # checked every step
     a.twin.faults.inject(FaultSpec('parts_vanish', '', {'x0': 0.45, 'y0': -0.3, 'x1': 0.55,
                                                         'y1': 0.3}, duration=1.0))
     a.twin.faults.inject(FaultSpec('parts_vanish', '', {'x0': 3.8, 'y0': -0.3, 'x1': 3.9,
@@ -295,7 +293,7 @@ def test_vanished_parts_keep_the_multi_scale_ledger_exact():
 def test_holds_part_says_whether_a_part_id_is_in_the_micro_scale_now():
     from conveyor_twin.faults.material import holds_part
     from conveyor_twin.faults.model import no_such_part
-    a = build_twin(load_cell(), seed=1, layout='composed')
+    a = build_twin(load_cell(), seed=1)
     ids = a.micro.spawn(0, np.array([1.0, 1.5]), np.array([0.0, 0.0]), np.zeros(2))
     assert all(holds_part(a.micro.sim, int(i)) for i in ids)
     assert not holds_part(a.micro.sim, int(ids.max()) + 1)

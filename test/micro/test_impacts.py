@@ -47,8 +47,9 @@ def test_oblique_disc_disc(e, mu):
     u = np.array([1.0, 0.0])
     ra = -r * n
     rb = r * n
-    out = impulse_response(u[0], u[1], 0.0, 1 / m, 1 / inertia, ra[0], ra[1], 0.0, 0.0, 0.0,
-                           1 / m, 1 / inertia, rb[0], rb[1], n[0], n[1], e, mu, mu, 0.01)
+    out = impulse_response((u[0], u[1], 0.0, 1 / m, 1 / inertia, ra[0], ra[1]),
+                           (0.0, 0.0, 0.0, 1 / m, 1 / inertia, rb[0], rb[1]), n[0], n[1], e,
+                           (mu, mu, 0.01))
     va, wa, vb, wb = np.array(out[:2]), out[2], np.array(out[3:5]), out[5]
     un = u @ n
     ut = u @ t
@@ -82,9 +83,9 @@ def test_random_impacts_conserve_momentum_and_never_gain_energy():
         n = np.array([math.cos(phi), math.sin(phi)])
         e = rng.uniform(0, 1)
         mu_s, mu_k = rng.uniform(0, 1.0, 2)
-        out = impulse_response(va[0], va[1], wa, 1 / ma, 1 / ia, ra[0], ra[1], vb[0], vb[1],
-                               wb, 1 / mb, 1 / ib, rb[0], rb[1], n[0], n[1], e, mu_s, mu_k,
-                               0.05)
+        out = impulse_response((va[0], va[1], wa, 1 / ma, 1 / ia, ra[0], ra[1]),
+                               (vb[0], vb[1], wb, 1 / mb, 1 / ib, rb[0], rb[1]), n[0], n[1], e,
+                               (mu_s, mu_k, 0.05))
         va2, wa2, vb2, wb2 = np.array(out[:2]), out[2], np.array(out[3:5]), out[5]
         p0 = ma * va + mb * vb
         p1 = ma * va2 + mb * vb2

@@ -7,11 +7,10 @@ import pytest
 
 from conveyor_twin.micro import MicroSim
 from conveyor_twin.micro.collide import box_vertices, collide
-from conveyor_twin.micro.contacts import (CT_BVX, CT_BVY, CT_BW, CT_E, CT_KA, CT_KB, CT_LN,
-                                          CT_LT, CT_MU_K, CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY,
-                                          CT_RBX, CT_RBY, CT_V_T, detect, limit_energy,
-                                          prepare_contacts, PV_KA, PV_KB, PV_LN, PV_LT,
-                                          solve_impulses, update_pairs)
+from conveyor_twin.micro.contacts import (CT_BVX, CT_BVY, CT_BW, CT_E, CT_KA, CT_KB, CT_MU_K,
+                                          CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY,
+                                          CT_V_T, detect, limit_energy, prepare_contacts, PV_KA,
+                                          PV_KB, PV_LN, PV_LT, solve_impulses, update_pairs)
 from conveyor_twin.micro.kernel import CF_SKIN
 from conveyor_twin.micro.reference import box_core, collide_ref, sweeps_ref
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
@@ -80,9 +79,8 @@ def test_impulse_sweeps_match_reference():
     update_pairs(n, s.ids, s.part_type, x, y, sim.pt, sim.grid.gpar, sim.grid.gdim,
                  sim._cell_table, sim._cell_items, sim._part_cell, sim._cand, sim._nbr,
                  sim._pos0, sim.cfg[CF_SKIN])
-    nc = detect(n, s.ids, s.part_type, x, y, yaw, sim.pt, sim._nbr, sim._part_cell,
-                sim.grid.static_start, sim.grid.static_items, sim.shapes, sim.shape_verts,
-                sim.act_state, sim.act_verts, sim._va, sim._vb, sim._out, sim._ct, sim._cidx)
+    parts, _model, drives, grid, statics, contact_arrays = sim._args[:6]
+    nc = detect(n, parts, sim.pt, grid, statics, drives, contact_arrays)
     assert nc >= 5
     ct, cidx, prev = sim._ct, sim._cidx, sim._prev
     # a previous substep that had every other contact (and one more that is gone)
@@ -113,8 +111,8 @@ def test_impulse_sweeps_match_reference():
     assert prepare_contacts(nc, ct, cidx, s.part_type, sim.pt, sim.mp, vx, vy, wz, *v0,
                             prev) == len(warm)
     solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, sim.mp, sim.acc, prev)
-    scaled = limit_energy(n, nc, ct, cidx, s.part_type, vx, vy, wz, *v0, sim.pt, prev, heat,
-                          sim._island, sim._island_sums)
+    scaled = limit_energy(n, nc, s.part_type, sim.pt, (vx, vy, wz), v0, heat,
+                          contact_arrays)
     assert scaled > 0      # the limit is exercised
     assert vx[:n] == pytest.approx(v[:, 0], abs=1e-12)
     assert vy[:n] == pytest.approx(v[:, 1], abs=1e-12)

@@ -10,7 +10,7 @@ import yaml
 from conveyor_twin import contract
 from conveyor_twin.cell import default_cell_text
 from conveyor_twin.cell.loader import cell_from_mapping
-from conveyor_twin.coord.commands import BELT
+from conveyor_twin.coord.commands import CommandKind
 from conveyor_twin.coord.stages import MacroStage, MicroStage
 from conveyor_twin.coord.twin import Twin
 from conveyor_twin.output.frame import Frame
@@ -87,7 +87,7 @@ def test_a_frame_per_step_holds_every_stream_once_with_its_stamp():
     assert edges >= 2, 'the run should cover edges'
     assert frames[-1].diagnostics == b'diag%d' % frames[-1].time_ns
     assert [(f.step, [c.kind for c in f.commands]) for f in frames if f.commands] == \
-        [(1, [BELT])]
+        [(1, [CommandKind.BELT])]
     # messages() lists every message with its contract topic, the stamp and the bytes
     f = frames[-1]
     listed = list(f.messages())
@@ -207,3 +207,48 @@ def test_the_recording_sink_records_every_frame_with_its_stamp(tmp_path):
     assert commands == [(DT_NS, cdr.encode_belt_command('main', 0.3))]
     assert got.pop('/twin/markers') == [(123, b'\x00\x01\x00\x00markers')]
     assert got == expected
+
+
+class _Calls:
+    """A recorder that keeps what a sink hands it, in order."""
+
+    def __init__(self) -> None:
+        self.calls = []
+
+    def add_topic(self, name, type_name, qos=None) -> bool:
+        return True
+
+    def record(self, name, stamp_ns, data) -> None:
+        self.calls.append((name, stamp_ns, data))
+
+    def record_accepted_command(self, kind, stamp_ns, data) -> None:
+        pass
+
+
+def test_sinks_take_the_streams_in_the_order_and_places_of_the_frame_table():
+    """The recording holds a step's messages in the order of ``contract.FRAME``; a silenced
+    stream's place holds its empty value."""
+    from conveyor_twin.faults.model import FaultSpec
+    cell = _cell()
+    twin, micro, _, output = _twin(cell)
+    recorder = _Calls()
+    output.subscribe(RecordingSink(recorder, namespace='/twin'))
+    keeper = Keeper()
+    output.subscribe(keeper)
+    twin.commands.submit_belt('main', 1.0)
+    micro.spawn(cell.part_type_index('spacer'), np.array([1.9]), np.array([0.05]),
+                np.zeros(1))
+    twin.faults.inject(FaultSpec('stream_outage', contract.DENSITY.name, duration=0.01),
+                       step=50)
+    twin.step(STEPS)
+    expected = [('/clock' if topic is contract.CLOCK else '/twin/' + topic.name, stamp, data)
+                for f in keeper.frames for topic, stamp, data in f.messages()]
+    assert recorder.calls == expected
+    order = {slot.topic: i for i, slot in enumerate(contract.FRAME)}
+    for f in keeper.frames:
+        ranks = [order[topic] for topic, _, _ in f.messages()]
+        assert ranks == sorted(ranks)
+    silenced = [f.step for f in keeper.frames if f.density == ()]
+    assert silenced == list(range(50, 60))
+    assert {t.name for t, _, _ in keeper.frames[0].messages()} >= {
+        contract.FAULTS.name, contract.DENSITY.name}

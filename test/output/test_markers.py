@@ -8,7 +8,7 @@ import pytest
 
 from conveyor_twin.cell import load_cell
 from conveyor_twin.output import markers as m
-from conveyor_twin.wire.cdr import _Builder, _string_bytes, stamp_parts
+from conveyor_twin.wire.builder import CdrBuilder, stamp_parts, string_bytes
 
 EXAMPLES = sorted(glob.glob(os.path.join(os.path.dirname(m.__file__), '..', 'cell', 'examples',
                                          '*.yaml')))
@@ -27,12 +27,12 @@ def test_fast_marker_equals_general_writer_at_every_alignment(offset, n_points):
     rng = np.random.default_rng(offset * 10 + n_points)
     marker = random_marker(rng, n_points)
     stamp_ns = 1_234_567_891_011
-    general = _Builder()
+    general = CdrBuilder()
     general.buf.extend(bytes(offset))
     m._write_marker(general, marker, stamp_ns, 'cell')
     fast = bytearray(offset)
     m._append_marker(fast, marker, m._STAMP.pack(*stamp_parts(stamp_ns)),
-                     _string_bytes('cell'))
+                     string_bytes('cell'))
     assert bytes(fast) == bytes(general.buf)
 
 
@@ -50,7 +50,7 @@ def test_cell_markers_equal_the_general_encoding(cell_file):
         data = cm.build(42_000_000, part_type, x, y, blocked, position)
         # the static prefix and the moving markers, all through _write_marker
         static_count = cm._static_count
-        b = _Builder()
+        b = CdrBuilder()
         b.buf.extend(cm._static)
         moving = []
         for index, pt in enumerate(cell.part_types):

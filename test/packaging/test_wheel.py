@@ -28,6 +28,7 @@ import pytest
 
 from conveyor_twin import __version__
 from conveyor_twin.testing.ros_env import ros_subprocess_env
+from conveyor_twin.wire.schemas import SCHEMAS
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / 'tools'))
@@ -46,6 +47,7 @@ USER_TEST_DEPENDENCIES = ('pytest', 'pytest-xdist')
 PROBE = '''
 import importlib.metadata, json, os, sys
 import conveyor_twin, conveyor_twin_msgs.msg
+from conveyor_twin.wire import msg_files, schemas
 from ament_index_python.packages import get_package_share_directory
 from rclpy.serialization import deserialize_message, serialize_message
 message = conveyor_twin_msgs.msg.BeltCommand(belt='main', speed=0.25)
@@ -56,6 +58,8 @@ print(json.dumps({
     'round_trip': deserialize_message(serialize_message(message), type(message)) == message,
     'metadata_version': importlib.metadata.version('conveyor_twin'),
     'prefix': sys.prefix,
+    'msg_defs': str(msg_files.contract_dir()),
+    'schemas': schemas.SCHEMAS,
 }))
 '''
 
@@ -159,6 +163,11 @@ def test_the_wheel_installs_and_runs_in_a_clean_environment():
             venv / 'share' / 'conveyor_twin', venv / 'share' / 'conveyor_twin_msgs']
         assert probe['round_trip'] is True
         assert probe['metadata_version'] == f'{__version__}+{distro}'
+        # the recorded schemas come from the wheel's copy of msg_defs/, byte for byte
+        assert Path(probe['msg_defs']).is_relative_to(site)
+        assert Path(probe['msg_defs']).parts[-4:] == ('conveyor_twin', 'wire', 'msg',
+                                                      'conveyor_twin_msgs')
+        assert probe['schemas'] == SCHEMAS
 
         out = check(run([venv / 'bin' / 'conveyor-twin', '--version'], env=env, cwd=tmp,
                         timeout=RUN_TIMEOUT), 'conveyor-twin --version')

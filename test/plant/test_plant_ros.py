@@ -69,7 +69,8 @@ class KilledCell:
 
     def __init__(self, context, processes, link: str) -> None:
         from conveyor_twin import contract
-        from conveyor_twin.ros.plant_node import PlantMonitor, TransferAccepted
+        from conveyor_twin.ros.plant_messages import TransferAccepted
+        from conveyor_twin.ros.plant_monitor import PlantMonitor
         from conveyor_twin.ros.qos import to_rclpy
         self.plant = load_plant(CHAIN)
         self.processes = processes
@@ -229,7 +230,8 @@ def test_composed_plant_records_every_cell(ros_processes, tmp_path):
 
 
 def test_the_monitor_ignores_a_late_report_of_an_ended_run(ros_context):
-    from conveyor_twin.ros.plant_node import CellProgress, PlantMonitor
+    from conveyor_twin.ros.plant_messages import CellProgress
+    from conveyor_twin.ros.plant_monitor import PlantMonitor
     monitor = PlantMonitor(load_plant(CHAIN), context=ros_context)
     try:
         for run, step in ((1, 10), (2, 5), (1, 11)):   # run 1's last report comes late

@@ -25,6 +25,9 @@ BAGS_DIR = ROOT / 'bags'
 BAGS = sorted(p.name for p in BAGS_DIR.glob('*.mcap'))
 DT_NS = 1_000_000
 MAX_BAG_BYTES = 5 * 1024 * 1024
+# s a resimulate command may take: it loads the kernels and reruns 4 s of the cell, minutes on a
+# loaded 2-core machine (a hang still ends the test)
+CLI_TIMEOUT = 900
 EVERY_STEP = ('/parts', '/light_barriers', '/belt_states', '/actuator_states', '/clock')
 STALE = ('{bag} no longer re-simulates with this software: if the change of behaviour is '
          'intended, regenerate the bags with bags/make_bags.sh (see bags/README.md). {what}')
@@ -251,7 +254,7 @@ def test_resimulate_detects_an_altered_message(tmp_path, ros_context):
     assert report.compared['/parts'] == 3209
     # and the command line says so with exit code 1
     result = subprocess.run([sys.executable, '-m', 'conveyor_twin.cli', 'resimulate',
-                             str(path)], capture_output=True, text=True, timeout=120)
+                             str(path)], capture_output=True, text=True, timeout=CLI_TIMEOUT)
     assert result.returncode == 1, result.stdout + result.stderr
     assert 'FIRST DIFFERENCE: /parts message #3210 (step 3210' in result.stdout
     assert f'byte offset {offset}: field wz[' in result.stdout
@@ -266,7 +269,7 @@ def test_resimulate_refuses_what_it_cannot_rerun(tmp_path):
     for path, why in ((foreign, 'no conveyor_twin metadata'),
                       (tmp_path / 'missing.mcap', 'no such file')):
         result = subprocess.run([sys.executable, '-m', 'conveyor_twin.cli', 'resimulate',
-                                 str(path)], capture_output=True, text=True, timeout=120)
+                                 str(path)], capture_output=True, text=True, timeout=CLI_TIMEOUT)
         assert result.returncode == 2 and why in result.stderr, result.stderr
 
 

@@ -7,26 +7,27 @@ import numpy as np
 import pytest
 
 from conveyor_twin.cli import info as info_verb, plot as plot_verb, recover as recover_verb
+from conveyor_twin.contract import Stamp
 from conveyor_twin.record import reader, series, topics
-from conveyor_twin.record.decode import (decode_actuator_states, decode_belt_states,
-                                         decode_light_barrier_edge)
 from conveyor_twin.wire import cdr
+from conveyor_twin.wire.decoders import (decode_actuator_states, decode_belt_states,
+                                          decode_light_barrier_edge)
 
 from .synthetic import belt_clock, conveyor_run
 
 
 def test_stamp_is_read_from_the_cdr_bytes():
     t = 12 * 10**9 + 345_678_901
-    assert topics.stamp_ns(topics.CLOCK, cdr.encode_clock(t)) == t
+    assert topics.stamp_ns(Stamp.CLOCK, cdr.encode_clock(t)) == t
     data = cdr.encode_part_states(t, 'cell', 7, [1], [0], [0.1], [0.2], [0.0], [0.0], [0.0],
                                   [0.0])
-    assert topics.stamp_ns(topics.HEADER, data) == t
+    assert topics.stamp_ns(Stamp.HEADER, data) == t
     edge = cdr.encode_light_barrier_edge(t, 'cell', 'lb', True, 3)
-    assert topics.stamp_ns(topics.HEADER, edge) == t
-    assert topics.stamp_ns(topics.NONE, cdr.encode_belt_command('main', 0.2)) is None
+    assert topics.stamp_ns(Stamp.HEADER, edge) == t
+    assert topics.stamp_ns(Stamp.NONE, cdr.encode_belt_command('main', 0.2)) is None
     big_endian = b'\x00\x00\x00\x00' + (12).to_bytes(4, 'big') + (5).to_bytes(4, 'big')
-    assert topics.stamp_ns(topics.CLOCK, big_endian) == 12 * 10**9 + 5
-    assert topics.stamp_ns(topics.CLOCK, b'\x00\x01\x00\x00\x01') is None
+    assert topics.stamp_ns(Stamp.CLOCK, big_endian) == 12 * 10**9 + 5
+    assert topics.stamp_ns(Stamp.CLOCK, b'\x00\x01\x00\x00\x01') is None
 
 
 def test_names_resolve_in_a_namespace():

@@ -34,7 +34,7 @@ from conveyor_twin.ros.compose import ComposedTwin, EXECUTOR
 from conveyor_twin.ros.coordinator_node import CoordinatorNode, HEALTH_STATUS
 from conveyor_twin.ros.endpoints import create_subscription
 from conveyor_twin.ros.micro_node import MARKERS_THREAD
-from conveyor_twin.ros.split import ros_args
+from conveyor_twin.split.launch import ros_args
 from conveyor_twin.testing.ros_env import wait_for
 
 pytestmark = pytest.mark.ros
@@ -388,7 +388,7 @@ def test_a_replay_prefetch_failure_is_reported_and_raised(monkeypatch):
 
 
 def test_a_failing_writer_ends_conveyor_twin_record(tmp_path, monkeypatch, capfd):
-    from conveyor_twin.ros import record_node
+    from conveyor_twin.cli import record
 
     def disk_full(*_):
         raise OSError(28, 'No space left on device')
@@ -396,8 +396,7 @@ def test_a_failing_writer_ends_conveyor_twin_record(tmp_path, monkeypatch, capfd
     monkeypatch.setattr('conveyor_twin.record._mcapfile.McapFile.flush', disk_full)
     saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:  # without the failure it would record for 600 s
-        code = record_node.main(['-o', str(tmp_path / 'rec.mcap'), '--duration', LONG,
-                                 '--json'])
+        code = record.main(['-o', str(tmp_path / 'rec.mcap'), '--duration', LONG, '--json'])
     finally:
         for sig, handler in saved.items():
             signal.signal(sig, handler)

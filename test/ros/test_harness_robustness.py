@@ -152,7 +152,7 @@ def test_a_controller_process_that_dies_fails_the_next_call(conveyor_twin_factor
 def test_a_dead_split_process_is_named_with_its_exit_code_and_log(conveyor_twin_factory):
     twin = conveyor_twin_factory(layout='split')
     twin.step(2)
-    micro = [p for name, p, _ in twin._running.children if name == 'micro_simulator'][0]
+    micro = [c.proc for c in twin._running.split.children if c.name == 'micro_simulator'][0]
     os.kill(micro.pid, signal.SIGKILL)
     micro.wait(timeout=60)
     with pytest.raises(BackgroundFailure) as raised:

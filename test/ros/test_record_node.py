@@ -9,6 +9,7 @@ import time
 import pytest
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from conveyor_twin.contract import Stamp, TOPICS
 from conveyor_twin.record import reader, topics as contract
 from conveyor_twin.record.writer import McapRecorder
 from conveyor_twin.ros.record_node import message_class, RecordNode
@@ -48,7 +49,7 @@ class Publisher:
         self.node = rclpy.create_node('test_publisher', context=context)
         self.pubs = {}
         for name in ('/clock', 'belt_states', 'parts', 'light_barrier_edges', 'belt_command'):
-            spec = contract.CONTRACT_TOPICS[name]
+            spec = TOPICS[name]
             qos = CLOCK_QOS if name == '/clock' else RELIABLE_ALL
             self.pubs[name] = self.node.create_publisher(
                 message_class(spec.type_name), contract.resolve(name, namespace), qos)
@@ -98,7 +99,7 @@ def test_record_node_round_trip(tmp_path, ros_context, ros_executor):
         else:
             assert sorted(m.data for m in got[topic]) == sorted(sent[name]), name
         for m in got[topic]:  # log time = the stamp in the message
-            assert m.log_time == contract.stamp_ns(contract.HEADER, m.data)
+            assert m.log_time == contract.stamp_ns(Stamp.HEADER, m.data)
     assert [m.data for m in got['/twin/parts']] == sent['parts'][::5]
     [cmd] = got['/twin/belt_command']
     assert cmd.data == command and cmd.log_time == 21 * DT_NS
@@ -163,3 +164,29 @@ def test_record_process_stops_cleanly_on_sigint(tmp_path, ros_context, ros_execu
     line = next(ln for ln in out.splitlines() if ln.strip().startswith('/parts'))
     assert line.split()[1:4] == [str(steps), str(steps // 4), str(steps - steps // 4)]
     assert '/clock' in out and str(clock_count) in out
+
+
+def test_the_command_lines_reach_the_recorders_as_options(monkeypatch, capsys):
+    from conveyor_twin.cli import record as cli_record
+    from conveyor_twin.cli.run import build_parser
+    from conveyor_twin.ros import record_node
+    from conveyor_twin.ros.run_recording import RecordingOptions
+
+    got = []
+    monkeypatch.setattr(record_node, 'record', lambda options: got.append(options) or 0)
+    assert cli_record.main(['-o', 'x.mcap', '--namespace', 'twin', '--topics', 'parts',
+                            '--decimate', 'parts=4', '--compression', 'zstd']) == 0
+    [options] = got
+    assert [s.name for s in options.specs] == ['parts']
+    assert options.decimation == {'/twin/parts': 4}
+    assert (options.output, options.namespace, options.compression) == ('x.mcap', 'twin',
+                                                                        'zstd')
+    assert cli_record.main(['-o', 'x.mcap', '--decimate', 'parts=0']) == 2 and len(got) == 1
+    assert 'expected NAME=K' in capsys.readouterr().err
+    args = build_parser().parse_args(
+        ['--cell', 'c.yaml', '--record', 'r.mcap', '--record-topics', 'parts',
+         '--record-decimate', 'parts=10', '--record-queue-size', '3', '--command',
+         '5:belt:main=1'])
+    assert cli_record.recording_options(args) == RecordingOptions(
+        path='r.mcap', topics=['parts'], decimate=['parts=10'], queue_size=3,
+        commands=['5:belt:main=1'], cell_file='c.yaml', markers_rate=30.0)

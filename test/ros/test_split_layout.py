@@ -4,8 +4,6 @@ The same cell, seed and command sequence must give bit-identical streams whether
 composed in one process or split over three, and from one run to the next.
 """
 
-import sys
-
 from conveyor_twin_msgs.msg import ActuatorCommand, BeltCommand
 from conveyor_twin_msgs.srv import Reset
 import pytest
@@ -14,7 +12,7 @@ from conveyor_twin.cell import load_cell
 from conveyor_twin.coord.stages import MacroStage
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.ros.compose import ComposedTwin
-from conveyor_twin.ros.split import ros_args
+from conveyor_twin.split.launch import launch, ros_args
 from conveyor_twin.wire import cdr
 from test.ros.test_node_parameters import check_parameters as check_node_parameters, NODES
 from conveyor_twin.testing import Driver
@@ -43,20 +41,17 @@ def _density_per_step(cell) -> int:
 
 
 def start_split(ros_processes, tmp_path, tag: str, cell_file: str = ''):
-    """Start micro, macro and coordinator processes in lockstep; return them."""
-    args = ros_args(cell_file, SEED, 'lockstep', 0.0, None, 0.0)
-    procs = []
-    for module in ('conveyor_twin.ros.micro_node', 'conveyor_twin.ros.macro_node',
-                   'conveyor_twin.ros.split'):
-        log = open(tmp_path / f'{tag}_{module.rsplit(".", 1)[1]}.log', 'w')
-        procs.append(ros_processes.start([sys.executable, '-m', module] + args,
-                                         stdout=log, stderr=log))
-        log.close()
-    return procs
+    """Start micro, macro and coordinator processes in lockstep with the split layout's
+    launcher, each writing ``<tag>/<module>.log``; return them."""
+    log_dir = tmp_path / tag
+    log_dir.mkdir()
+    return launch(ros_args(cell_file, SEED, 'lockstep', 0.0, None, 0.0),
+                  start=ros_processes.start, log_dir=log_dir)
 
 
 def _logs(tmp_path) -> str:
-    return '\n'.join(f'--- {p.name}\n{p.read_text()[-2000:]}' for p in tmp_path.glob('*.log'))
+    return '\n'.join(f'--- {p.parent.name}/{p.name}\n{p.read_text()[-2000:]}'
+                     for p in tmp_path.glob('*/*.log'))
 
 
 def _reset_and_step(driver: Driver, steps: int) -> None:
@@ -166,10 +161,10 @@ def _coupled_cell_file(tmp_path) -> str:
 
 def test_split_hand_over_between_scales_is_identical_to_composed(
         ros_context, ros_processes, tmp_path):
-    # The hand-over runs in the macro process on a mirror of the micro state (coord.mirror);
+    # The hand-over runs in the macro process on a mirror of the micro state (split.mirror);
     # the edits go back to the micro process: every stream, the density and the ledger in the
     # summary counters must match the composed layout's bit for bit, also after a reset.
-    from conveyor_twin.coord.mirror import has_coupling
+    from conveyor_twin.split.mirror import has_coupling
     cell_file = _coupled_cell_file(tmp_path)
     assert has_coupling(load_cell(cell_file))
     composed, composed_counts, composed_driver = run_composed(ros_context, 'probe_cc',
@@ -188,7 +183,7 @@ def test_split_hand_over_between_scales_is_identical_to_composed(
     assert split_counts == composed_counts, _logs(tmp_path)
     assert split == composed, _logs(tmp_path)
     # the ledger comes from the macro process's counters (printed in the summary at exit)
-    summary = _summary(tmp_path / 'sc_split.log')
+    summary = _summary(tmp_path / 'sc' / 'split.log')
     counters = composed_driver.twin_counters
     # (after the reset: 400 steps at 600 parts/s switch tiles again)
     assert counters['macro_balance_captured'] > 50 and counters['macro_balance_released'] > 5
@@ -201,7 +196,7 @@ def test_split_hand_over_between_scales_is_identical_to_composed(
 def _summary(log) -> dict:
     import json
 
-    from conveyor_twin.ros.split import SUMMARY_PREFIX
+    from conveyor_twin.split.launch import SUMMARY_PREFIX
     lines = [ln for ln in log.read_text().splitlines() if ln.startswith(SUMMARY_PREFIX)]
     assert lines, log.read_text()[-2000:]
     return json.loads(lines[-1][len(SUMMARY_PREFIX):])

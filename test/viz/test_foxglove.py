@@ -9,7 +9,7 @@ import pytest
 
 from conveyor_twin.cell import load_cell
 from conveyor_twin.coord.timing import TimeMode
-from conveyor_twin.record.decode import decode_belt_states
+from conveyor_twin.wire.decoders import decode_belt_states
 from conveyor_twin.wire import cdr
 from test.viz.foxglove_wire import Deadline
 

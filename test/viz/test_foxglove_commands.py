@@ -68,7 +68,7 @@ def test_a_string_speed_from_a_client_is_rejected_in_diagnostics_and_not_applied
     websockets_client = pytest.importorskip('websockets.sync.client')
     pytest.importorskip('foxglove')
     from conveyor_twin.coord.timing import TimeMode
-    from conveyor_twin.record.decode import decode_belt_states
+    from conveyor_twin.wire.decoders import decode_belt_states
     from conveyor_twin.ros.compose import ComposedTwin
     from test.viz.foxglove_wire import (Deadline, SUBPROTOCOL, advertised, messages,
                                         subscribe)

@@ -5,9 +5,9 @@ from mcap.records import Schema
 import numpy as np
 import pytest
 
-from conveyor_twin.wire.cdr import CdrError
-from conveyor_twin.wire.diagnostics import (decode_diagnostic_array, encode_diagnostic_array,
-                                            ERROR, OK, Status, WARN)
+from conveyor_twin.wire.builder import CdrError
+from conveyor_twin.wire.decoders import decode_diagnostic_array
+from conveyor_twin.wire.diagnostics import encode_diagnostic_array, ERROR, OK, Status, WARN
 from conveyor_twin.wire.schemas import SCHEMAS
 
 TYPE = 'diagnostic_msgs/msg/DiagnosticArray'

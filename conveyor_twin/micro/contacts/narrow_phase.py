@@ -24,8 +24,8 @@ from conveyor_twin.micro.contacts.tables import (AS_ACTIVE, AS_E, AS_MU, AS_NV, 
                                                  CT_RBX, CT_RBY, CT_V_T, SH_E, SH_MU, SH_NV,
                                                  SH_OFF, SH_R, SH_XMAX, SH_XMIN, SH_YMAX,
                                                  SH_YMIN)
-from conveyor_twin.micro.state import (PT_BRAD, PT_E, PT_HL, PT_HW, PT_MU_K, PT_MU_S, PT_RADIUS,
-                                       PT_SHAPE, PT_V_T, SHAPE_DISC)
+from conveyor_twin.micro.state import (P_X, P_Y, P_YAW, PT_BRAD, PT_E, PT_HL, PT_HW, PT_MU_K,
+                                       PT_MU_S, PT_RADIUS, PT_SHAPE, PT_V_T, SHAPE_DISC)
 
 # Added to the first key of a part's contacts with fixed and kinematic bodies: they follow all
 # part pairs in the canonical order (ids stay below it).
@@ -44,8 +44,19 @@ def part_shape(pt, t, x, y, yaw, verts):
 
 
 @njit(cache=True, inline='always')
-def _record(nc, ct, cidx, a, b, px, py, ax, ay, bx, by, nx, ny, depth, e, mu_s, mu_k, v_t,
-            bvx, bvy, bw, ka, kb):
+def _record(nc, ct, cidx, a, b, point, centres, normal, depth, material, motion, keys):
+    """Write contact record ``nc`` of bodies ``a``, ``b`` (-1: fixed or kinematic).
+
+    ``point = (px, py)`` [m]; ``centres = (ax, ay, bx, by)`` [m], the bodies' centres (or
+    pivots); ``normal = (nx, ny)`` pointing to A; ``depth`` [m]; ``material = (e, mu_s, mu_k,
+    v_t)``; ``motion = (bvx, bvy, bw)``, B's velocity if kinematic; ``keys = (ka, kb)``.
+    """
+    px, py = point
+    ax, ay, bx, by = centres
+    nx, ny = normal
+    e, mu_s, mu_k, v_t = material
+    bvx, bvy, bw = motion
+    ka, kb = keys
     ct[nc, CT_KA] = ka
     ct[nc, CT_KB] = kb
     ct[nc, CT_LN] = 0.0
@@ -88,16 +99,23 @@ def _pair(i, j, ka, kb, ptype, x, y, yaw, pt, va, vb, out, nc, ct, cidx):
     for c in range(count):
         if nc >= ct.shape[0]:
             return nc
-        _record(nc, ct, cidx, i, j, out[2 + 3 * c], out[3 + 3 * c], x[i], y[i], x[j], y[j],
-                out[0], out[1], out[4 + 3 * c], e, mu_s, mu_k, v_t, 0.0, 0.0, 0.0, ka, kb + c)
+        _record(nc, ct, cidx, i, j, (out[2 + 3 * c], out[3 + 3 * c]), (x[i], y[i], x[j], y[j]),
+                (out[0], out[1]), out[4 + 3 * c], (e, mu_s, mu_k, v_t), (0.0, 0.0, 0.0),
+                (ka, kb + c))
         nc += 1
     return nc
 
 
 @njit(cache=True)
-def _fixed(i, ka, kb, ptype, x, y, yaw, pt, va, vb, nb, rb, bvx, bvy, bw, bpx, bpy, e, mu, out,
-           nc, ct, cidx):
-    """Record the contacts of part i with a fixed or kinematic body (core ``vb[:nb]``)."""
+def _fixed(i, keys, ptype, x, y, yaw, pt, va, body, out, nc, ct, cidx):
+    """Record the contacts of part i with a fixed or kinematic body; return the new count.
+
+    ``keys = (ka, kb)``: the first contact's keys; ``body = (vb, nb, rb, bvx, bvy, bw, bpx, bpy,
+    e, mu)``: its core ``vb[:nb]`` and radius [m], velocity [m/s, rad/s] about the point
+    ``(bpx, bpy)`` [m], restitution and friction.
+    """
+    ka, kb = keys
+    vb, nb, rb, bvx, bvy, bw, bpx, bpy, e, mu = body
     ti = ptype[i]
     na, ra = part_shape(pt, ti, x[i], y[i], yaw[i], va)
     count = collide(va, na, ra, vb, nb, rb, out)
@@ -108,29 +126,40 @@ def _fixed(i, ka, kb, ptype, x, y, yaw, pt, va, vb, nb, rb, bvx, bvy, bw, bpx, b
     for c in range(count):
         if nc >= ct.shape[0]:
             return nc
-        _record(nc, ct, cidx, i, -1, out[2 + 3 * c], out[3 + 3 * c], x[i], y[i], bpx, bpy,
-                out[0], out[1], out[4 + 3 * c], e, mu * ratio, mu, pt[ti, PT_V_T], bvx, bvy,
-                bw, ka, kb + c)
+        _record(nc, ct, cidx, i, -1, (out[2 + 3 * c], out[3 + 3 * c]), (x[i], y[i], bpx, bpy),
+                (out[0], out[1]), out[4 + 3 * c], (e, mu * ratio, mu, pt[ti, PT_V_T]),
+                (bvx, bvy, bw), (ka, kb + c))
         nc += 1
     return nc
 
 
 @njit(cache=True)
-def detect(n, ids, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_items, shp,
-           shp_verts, act_state, act_verts, va, vb, out, ct, cidx):
+def detect(n, parts, pt, grid, statics, drives, contacts):
     """Record every contact of parts 0..n-1 in the canonical order; return how many.
 
-    :param ids: the parts' ids (ascending): with the shape index or the point they key the
-        records (``CT_KA``, ``CT_KB``), ascending in the canonical order.
-    :param nbr, part_cell: the neighbour list and the parts' grid cells as
+    The arrays come in the groups of :func:`conveyor_twin.micro.kernel.run_steps` (unpacked
+    here, no copies); read here:
+
+    :param parts: ``ids`` (ascending: with the shape index or the point they key the records,
+        ``CT_KA``, ``CT_KB``, ascending in the canonical order), ``ptype`` and the poses ``P``.
+    :param grid: the neighbour list ``nbr`` and the parts' grid cells ``part_cell`` as
         :func:`update_pairs` left them (current for these positions).
-    :param shp: static shape table (S, SH_COLUMNS); ``shp_verts`` (V, 2) their cores [m].
-    :param act_state: actuator table (A, AS_COLUMNS); ``act_verts`` (A, 4, 2) their cores.
-    :param static_start: int64[cells + 1], ``static_items``: the static shapes of each cell.
-    :param va: (4, 2) scratch; ``vb`` (4, 2) scratch; ``out`` float64[8].
-    :param ct: (C, CT_COLUMNS) contact records, ``cidx`` (C, 2) their bodies (output). When
-        full, further contacts are dropped (the caller sizes it; see ``contacts_full``).
+    :param statics: ``(static_start, static_items, shp, shp_verts)``: the static shapes of each
+        cell (int64[cells + 1], items), the shape table (S, SH_COLUMNS), their cores (V, 2) [m].
+    :param drives: the actuator table ``act_state`` (A, AS_COLUMNS) and cores ``act_verts``
+        (A, 4, 2).
+    :param contacts: scratch ``va``, ``vb`` (4, 2) and ``out`` float64[8]; the output ``ct``
+        (C, CT_COLUMNS), the contact records, and ``cidx`` (C, 2), their bodies. When full,
+        further contacts are dropped (the caller sizes it; see ``contacts_full``).
     """
+    _counters, ids, ptype, P, _W = parts
+    _gpar, _gdim, _cell_table, _cell_items, part_cell, _cand, nbr, _pos0 = grid
+    static_start, static_items, shp, shp_verts = statics
+    _belts, _belt_v, _apar, _act_v, act_state, act_verts = drives
+    va, vb, out, ct, cidx, _acc, _prev, _island, _island_sums = contacts
+    x = P[P_X]
+    y = P[P_Y]
+    yaw = P[P_YAW]
     cap = part_cell.shape[0]
     o_start = NB_HEADER + cap
     o_j = o_start + cap + 1
@@ -168,12 +197,13 @@ def detect(n, ids, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_it
                     ny = 0.0
                 depth = rsum - d
                 rb = pt[tj, PT_RADIUS] - 0.5 * depth
-                _record(nc, ct, cidx, i, j, x[j] + nx * rb, y[j] + ny * rb, xi, yi, x[j], y[j],
-                        nx, ny, depth, 0.5 * (pt[ti, PT_E] + pt[tj, PT_E]),
-                        0.5 * (pt[ti, PT_MU_S] + pt[tj, PT_MU_S]),
-                        0.5 * (pt[ti, PT_MU_K] + pt[tj, PT_MU_K]),
-                        0.5 * (pt[ti, PT_V_T] + pt[tj, PT_V_T]), 0.0, 0.0, 0.0, ka,
-                        2.0 * ids[j])
+                _record(nc, ct, cidx, i, j, (x[j] + nx * rb, y[j] + ny * rb),
+                        (xi, yi, x[j], y[j]), (nx, ny), depth,
+                        (0.5 * (pt[ti, PT_E] + pt[tj, PT_E]),
+                         0.5 * (pt[ti, PT_MU_S] + pt[tj, PT_MU_S]),
+                         0.5 * (pt[ti, PT_MU_K] + pt[tj, PT_MU_K]),
+                         0.5 * (pt[ti, PT_V_T] + pt[tj, PT_V_T])), (0.0, 0.0, 0.0),
+                        (ka, 2.0 * ids[j]))
                 nc += 1
             else:
                 nc = _pair(i, j, ka, 2.0 * ids[j], ptype, x, y, yaw, pt, va, vb, out, nc, ct,
@@ -222,15 +252,16 @@ def detect(n, ids, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_it
                 ti = ptype[i]
                 mu = shp[s, SH_MU]
                 ratio = pt[ti, PT_MU_S] / pt[ti, PT_MU_K] if pt[ti, PT_MU_K] > 0.0 else 1.0
-                _record(nc, ct, cidx, i, -1, qx + nx * (rb - 0.5 * depth),
-                        qy + ny * (rb - 0.5 * depth), x[i], y[i], 0.0, 0.0, nx, ny, depth,
-                        shp[s, SH_E], mu * ratio, mu, pt[ti, PT_V_T], 0.0, 0.0, 0.0, ka,
-                        2.0 * s)
+                _record(nc, ct, cidx, i, -1,
+                        (qx + nx * (rb - 0.5 * depth), qy + ny * (rb - 0.5 * depth)),
+                        (x[i], y[i], 0.0, 0.0), (nx, ny), depth,
+                        (shp[s, SH_E], mu * ratio, mu, pt[ti, PT_V_T]), (0.0, 0.0, 0.0),
+                        (ka, 2.0 * s))
                 nc += 1
                 continue
-            nc = _fixed(i, ka, 2.0 * s, ptype, x, y, yaw, pt, va, shp_verts[off:off + nv], nv,
-                        shp[s, SH_R], 0.0, 0.0, 0.0, 0.0, 0.0, shp[s, SH_E], shp[s, SH_MU],
-                        out, nc, ct, cidx)
+            nc = _fixed(i, (ka, 2.0 * s), ptype, x, y, yaw, pt, va,
+                        (shp_verts[off:off + nv], nv, shp[s, SH_R], 0.0, 0.0, 0.0, 0.0, 0.0,
+                         shp[s, SH_E], shp[s, SH_MU]), out, nc, ct, cidx)
         for a in range(act_state.shape[0]):
             if act_state[a, AS_ACTIVE] == 0.0:
                 continue
@@ -238,11 +269,11 @@ def detect(n, ids, ptype, x, y, yaw, pt, nbr, part_cell, static_start, static_it
                     or y[i] + bri <= act_state[a, AS_YMIN]
                     or y[i] - bri >= act_state[a, AS_YMAX]):
                 continue
-            nc = _fixed(i, ka, 2.0 * (n_static + a), ptype, x, y, yaw, pt, va, act_verts[a],
-                        int(act_state[a, AS_NV]),
-                        act_state[a, AS_R], act_state[a, AS_VX], act_state[a, AS_VY],
-                        act_state[a, AS_W], act_state[a, AS_PX], act_state[a, AS_PY],
-                        act_state[a, AS_E], act_state[a, AS_MU], out, nc, ct, cidx)
+            nc = _fixed(i, (ka, 2.0 * (n_static + a)), ptype, x, y, yaw, pt, va,
+                        (act_verts[a], int(act_state[a, AS_NV]), act_state[a, AS_R],
+                         act_state[a, AS_VX], act_state[a, AS_VY], act_state[a, AS_W],
+                         act_state[a, AS_PX], act_state[a, AS_PY], act_state[a, AS_E],
+                         act_state[a, AS_MU]), out, nc, ct, cidx)
     return nc
 
 
@@ -251,9 +282,9 @@ def scratch(capacity: int):
     acc3).
 
     ``prev`` (C + 1, PV_COLUMNS) keeps the previous substep's keys and impulses (row C: their
-    count) for the warm start in :func:`conveyor_twin.micro.contacts.response.prepare_contacts`;
+    count) for the warm start in :func:`conveyor_twin.micro.contacts.impulses.prepare_contacts`;
     ``parent`` (int64, capacity) and ``acc3`` ((3, capacity)) are the scratch of
-    :func:`conveyor_twin.micro.contacts.response.limit_energy`.
+    :func:`conveyor_twin.micro.contacts.energy.limit_energy`.
     """
     size = CONTACTS_PER_PART * capacity
     return (np.zeros(capacity + 1, dtype=np.int64), np.zeros((4, 2)), np.zeros((4, 2)),

@@ -1,0 +1,395 @@
+"""The impulse model: sequential impulses at the contacts and the position correction.
+
+Equal and opposite impulses at each contact point, applied to both bodies at the point's arms
+(``r_a``, ``r_b`` from one point), mass- and inertia-weighted through the effective masses
+``k_n = 1/m_a + 1/m_b + (r_a x n)^2 / I_a + (r_b x n)^2 / I_b`` (fixed and kinematic bodies:
+infinite mass). They are solved as sequential impulses (Catto; Erleben's projected
+Gauss-Seidel): :data:`~conveyor_twin.micro.sim.CONTACT_PASSES` sweeps over the contacts in the
+canonical order, each contact's normal impulse accumulated over the substep and kept >= 0, the
+tangential one kept within ``mu(|u_t|)`` times the normal one (Coulomb, Horváth et al.'s
+speed-dependent coefficient: static at rest, sliding above the transition speed, linear in
+between), each sweep starting from the impulses of the same contact one substep earlier (warm
+start: in a jam they are what holds back the belt's push, so the force chain through hundreds of
+parts need not be built anew every substep). Restitution (Newton's law) acts on the normal
+approach speed before any impulse of the substep, only above :data:`RESTITUTION_THRESHOLD`, so
+resting contacts do not chatter; an isolated impact gets exactly :func:`impulse_response`.
+
+What holds, to round-off, in every sweep: total linear and angular momentum (each impulse has
+its partner, at the same point); no increment adds kinetic energy (a normal increment at most
+reverses the current approach, down to the bounce; a tangential one at most reverses the current
+sliding). The warm start can (a stale impulse pushing apart bodies that no longer press on each
+other), which :func:`conveyor_twin.micro.contacts.energy.limit_energy` bounds. Penetration
+beyond the slop is removed by moving positions only (:func:`correct_positions`,
+:data:`~conveyor_twin.micro.sim.POSITION_PASSES` sweeps, inverse-mass proportion along ``n``):
+it never feeds into velocities, so it adds no energy and no momentum (the centre of mass stays;
+the angular momentum about a fixed point changes by ``m dx x v`` where bodies slide past each
+other while they overlap).
+
+Why warm starting, although Hoher et al. solve each contact once: every contact is still solved
+a fixed number of times per substep (no iteration to a tolerance, so cost and result stay
+time-deterministic), but momentum-conserving sweeps without memory do not hold a jam: on the
+benchmark jam (``conveyor-twin bench micro`` scene, 10 mm discs, 3 s) two such sweeps let the
+discs overlap by 9.6 mm (N = 1000) and 10 mm (N = 5000), i.e. parts pass through each other under
+the belt's push, because a sweep carries an impulse only a contact or two further. With the warm
+start and the same two sweeps the jam comes to rest (velocities of 1e-3 m/s and less while the
+belt runs under it); the deepest overlap, checked every 0.25 s over 6 s, peaks at 0.31 mm
+(N = 1000) and 0.8 mm (N = 5000, at 0.5 s, while the front of the jam forms), is at most
+0.12 mm and 0.34 mm from 0.75 s on and falls to 0.10 and 0.14 mm by 6 s.
+"""
+
+import math
+
+from numba import njit
+
+from conveyor_twin.micro.contacts.response import friction_coefficient
+from conveyor_twin.micro.contacts.tables import (A_CONTACT_FRICTION, CT_BOUNCE, CT_BVX, CT_BVY,
+                                                 CT_BW, CT_CNT, CT_DEPTH, CT_E, CT_IKN, CT_IKT,
+                                                 CT_KA, CT_KB, CT_LN, CT_LT, CT_MU_K, CT_MU_S,
+                                                 CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY,
+                                                 CT_SLOPE, CT_V_T, CT_WA, CT_WB, MP_CORRECTION,
+                                                 MP_SLOP, MP_TRACK, PV_KA, PV_KB, PV_LN, PV_LT)
+from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
+
+# Below this approach speed [m/s] a contact is treated as plastic (no bounce).
+RESTITUTION_THRESHOLD = 0.02
+
+
+@njit(cache=True, inline='always')
+def impulse_response(a, b, nx, ny, e, friction):
+    """Return the velocities after one contact's impulses and the impulses themselves.
+
+    :param a: body A, ``(vx, vy, w, im, ii, rx, ry)``: velocity [m/s], angular velocity
+        [rad/s], inverse mass [1/kg] (0: kinematic), inverse inertia, contact point relative
+        to its centre (or pivot) [m]. ``b``: body B, the same.
+    :param nx: unit normal pointing to A, with ``ny``.
+    :param e: restitution; ``friction``: ``(mu_s, mu_k, v_t)``, the friction law.
+    :return: (vax, vay, wa, vbx, vby, wb, j_n [N s], j_t [N s], u_t before friction [m/s]).
+    """
+    vax, vay, wa, ima, iia, rax, ray = a
+    vbx, vby, wb, imb, iib, rbx, rby = b
+    mu_s, mu_k, v_t = friction
+    ux = (vax - wa * ray) - (vbx - wb * rby)
+    uy = (vay + wa * rax) - (vby + wb * rbx)
+    un = ux * nx + uy * ny
+    if un >= 0.0:
+        return vax, vay, wa, vbx, vby, wb, 0.0, 0.0, 0.0
+    rna = rax * ny - ray * nx
+    rnb = rbx * ny - rby * nx
+    kn = ima + imb + iia * rna * rna + iib * rnb * rnb
+    ee = e if -un > RESTITUTION_THRESHOLD else 0.0
+    jn = -(1.0 + ee) * un / kn
+    vax += jn * nx * ima
+    vay += jn * ny * ima
+    wa += iia * rna * jn
+    vbx -= jn * nx * imb
+    vby -= jn * ny * imb
+    wb -= iib * rnb * jn
+    tx = -ny
+    ty = nx
+    ux = (vax - wa * ray) - (vbx - wb * rby)
+    uy = (vay + wa * rax) - (vby + wb * rbx)
+    ut = ux * tx + uy * ty
+    rta = rax * ty - ray * tx
+    rtb = rbx * ty - rby * tx
+    kt = ima + imb + iia * rta * rta + iib * rtb * rtb
+    jt = -ut / kt
+    limit = friction_coefficient(mu_s, mu_k, v_t, abs(ut)) * jn
+    if jt > limit:
+        jt = limit
+    elif jt < -limit:
+        jt = -limit
+    vax += jt * tx * ima
+    vay += jt * ty * ima
+    wa += iia * rta * jt
+    vbx -= jt * tx * imb
+    vby -= jt * ty * imb
+    wb -= iib * rtb * jt
+    return vax, vay, wa, vbx, vby, wb, jn, jt, ut
+
+
+@njit(cache=True, inline='always')
+def _masses(ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny):
+    """Return a contact's inverse normal and tangential effective masses ``kn``, ``kt`` [1/kg]
+    and the change of its tangential speed per unit normal impulse [1/kg]."""
+    rna = rax * ny - ray * nx
+    rnb = rbx * ny - rby * nx
+    rta = rax * nx + ray * ny
+    rtb = rbx * nx + rby * ny
+    kn = ima + imb + iia * rna * rna + iib * rnb * rnb
+    kt = ima + imb + iia * rta * rta + iib * rtb * rtb
+    return kn, kt, iia * rna * rta + iib * rnb * rtb
+
+
+@njit(cache=True)
+def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, v0x, v0y, w0, prev):
+    """Write the per-contact constants of the impulse and position sweeps and apply the warm
+    start (one pass); return how many contacts found their predecessor.
+
+    Constants: geometry only, so the divisions happen here, where they overlap, and the sweeps
+    only multiply: the inverse normal and tangential effective masses, the change of the
+    tangential speed per unit normal impulse, the friction slope and the shares of the
+    position correction (inverse-mass proportion times ``mp[MP_CORRECTION]``). The bounce
+    (``CT_BOUNCE``): ``e`` times the normal approach speed before any impulse of the substep
+    (``v0x``, ``v0y``, ``w0``: the velocities then), 0 below :data:`RESTITUTION_THRESHOLD`.
+
+    Warm start (Catto): a contact takes the accumulated impulses of the previous substep's
+    contact with the same keys (``CT_KA``, ``CT_KB``; both lists ascend in the canonical order,
+    so one merge finds them), the tangential one clamped to ``mu_s`` times the normal one, and
+    applies them to both bodies (``vx``, ``vy``, ``wz``), equal and opposite, at the contact
+    point. In a jam the previous impulses are what holds back the belt's push, so the sweeps
+    start from them instead of building a force chain through hundreds of parts anew every
+    substep.
+
+    :param prev: (C + 1, PV_COLUMNS) the previous contacts' keys and impulses, row C their count.
+    """
+    frac = mp[MP_CORRECTION]
+    last_vt = last_mu_k = last_mu_s = math.nan     # NaN: differs from everything
+    last_ima = last_imb = math.nan
+    last_kn = math.nan
+    last_ikn = 0.0
+    slope = 0.0
+    w = 0.0
+    nprev = int(prev[prev.shape[0] - 1, 0])
+    q = 0
+    found = 0
+    for c in range(nc):
+        a = cidx[c, 0]
+        b = cidx[c, 1]
+        ta = ptype[a]
+        ima = pt[ta, PT_INV_MASS]
+        iia = pt[ta, PT_INV_INERTIA]
+        imb = 0.0
+        iib = 0.0
+        if b >= 0:
+            tb = ptype[b]
+            imb = pt[tb, PT_INV_MASS]
+            iib = pt[tb, PT_INV_INERTIA]
+            vbx = v0x[b]
+            vby = v0y[b]
+            wb = w0[b]
+        else:
+            vbx = ct[c, CT_BVX]
+            vby = ct[c, CT_BVY]
+            wb = ct[c, CT_BW]
+        rax = ct[c, CT_RAX]
+        ray = ct[c, CT_RAY]
+        rbx = ct[c, CT_RBX]
+        rby = ct[c, CT_RBY]
+        nx = ct[c, CT_NX]
+        ny = ct[c, CT_NY]
+        kn, kt, cnt = _masses(ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny)
+        # a disc's contact normal runs through its centre: the normal effective mass is the
+        # same for every contact of the same bodies' types, so its reciprocal is reused
+        if kn != last_kn:
+            last_kn = kn
+            last_ikn = 1.0 / kn
+        ct[c, CT_IKN] = last_ikn
+        ct[c, CT_IKT] = 1.0 / kt
+        ct[c, CT_CNT] = cnt
+        # the same materials and masses as the contact before (the common case): the same
+        # quotients, without dividing again
+        v_t = ct[c, CT_V_T]
+        mu_k = ct[c, CT_MU_K]
+        mu_s = ct[c, CT_MU_S]
+        if v_t != last_vt or mu_k != last_mu_k or mu_s != last_mu_s:
+            last_vt = v_t
+            last_mu_k = mu_k
+            last_mu_s = mu_s
+            slope = (mu_k - mu_s) / v_t if v_t > 0.0 else 0.0
+        ct[c, CT_SLOPE] = slope
+        if ima != last_ima or imb != last_imb:
+            last_ima = ima
+            last_imb = imb
+            w = frac / (ima + imb)
+        ct[c, CT_WA] = w * ima
+        ct[c, CT_WB] = w * imb
+        un = (((v0x[a] - w0[a] * ray) - (vbx - wb * rby)) * nx
+              + ((v0y[a] + w0[a] * rax) - (vby + wb * rbx)) * ny)
+        ct[c, CT_BOUNCE] = ct[c, CT_E] * -un if -un > RESTITUTION_THRESHOLD else 0.0
+        # warm start
+        ka = ct[c, CT_KA]
+        kb = ct[c, CT_KB]
+        while q < nprev and (prev[q, PV_KA] < ka or (prev[q, PV_KA] == ka
+                                                     and prev[q, PV_KB] < kb)):
+            q += 1
+        if q < nprev and prev[q, PV_KA] == ka and prev[q, PV_KB] == kb:
+            found += 1
+            ln = prev[q, PV_LN]
+            limit = mu_s * ln
+            lt = min(max(prev[q, PV_LT], -limit), limit)
+            ct[c, CT_LN] = ln
+            ct[c, CT_LT] = lt
+            px = ln * nx - lt * ny
+            py = ln * ny + lt * nx
+            vx[a] += px * ima
+            vy[a] += py * ima
+            wz[a] += iia * (rax * py - ray * px)
+            if b >= 0:
+                vx[b] -= px * imb
+                vy[b] -= py * imb
+                wz[b] -= iib * (rbx * py - rby * px)
+    return found
+
+
+@njit(cache=True, inline='always')
+def _sweep_plan(nc, cidx):
+    """Return the sweep order's constants: the number of part-part contacts (they come first),
+    half of it rounded up, and the number of visits of a sweep."""
+    pairs = nc
+    while pairs > 0 and cidx[pairs - 1, 1] < 0:
+        pairs -= 1
+    half = (pairs + 1) // 2
+    return pairs, half, 2 * half + nc - pairs
+
+
+@njit(cache=True, inline='always')
+def _sweep_contact(k, pairs, half):
+    """Return the contact of a sweep's ``k``-th visit, or -1 for none.
+
+    The part-part contacts' two halves alternate (``0, h, 1, h + 1, ...``), then the contacts
+    with fixed and kinematic bodies follow in order. Consecutive contacts of a half often share
+    a body, so each one's impulse waits for the one before; the other half's contact in between
+    is far away (the canonical order follows the parts' slots), so the processor works on both
+    at once. Within each half the order stays canonical.
+    """
+    if k < 2 * half:
+        c = (k & 1) * half + (k >> 1)
+        return c if c < pairs else -1
+    return pairs + k - 2 * half
+
+
+@njit(cache=True)
+def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
+    """Apply the contacts' impulses in ``passes`` sweeps (the order of :func:`_sweep_contact`)
+    after the warm start of :func:`prepare_contacts`; keep the keys and accumulated impulses in
+    ``prev`` for the next substep.
+
+    Sequential impulses with accumulated impulses (Catto): every impulse acts on both bodies of
+    its contact, equal and opposite, at the contact point (the same point for both, so the
+    moments are those of one force), so every sweep keeps total linear and angular momentum to
+    round-off. The normal impulse of a contact accumulated over the substep stays >= 0; each
+    increment brings the relative normal speed ``u_n`` to ``min(b, |u_n|)`` (``b`` its bounce)
+    as far as that allows: a closing contact is stopped or bounced at most back at its approach
+    speed, a separating one slowed toward ``b``, so no increment adds kinetic energy. The
+    tangential increment stops the sliding, the accumulated tangential impulse clamped to
+    ``mu(|u_t|)`` times the normal one (Coulomb, Horváth et al.'s speed-dependent coefficient).
+    An isolated impact gets :func:`impulse_response`'s result in the first sweep and nothing
+    in the later ones.
+
+    The sweeps are Gauss-Seidel: each contact sees the velocities left by the ones before it,
+    so the per-contact work is a dependency chain; the records must have been prepared by
+    :func:`prepare_contacts` (the sweeps only multiply).
+    """
+    track = mp[MP_TRACK] != 0.0
+    pairs, half, visits = _sweep_plan(nc, cidx)
+    for it in range(passes):
+        last = it == passes - 1
+        # branch-free per contact (the outcome of closing/separating, sticking/sliding is
+        # data-dependent and would mispredict)
+        for k in range(visits):
+            c = _sweep_contact(k, pairs, half)
+            if c < 0:
+                continue
+            a = cidx[c, 0]
+            b = cidx[c, 1]
+            ta = ptype[a]
+            ima = pt[ta, PT_INV_MASS]
+            iia = pt[ta, PT_INV_INERTIA]
+            if b >= 0:
+                tb = ptype[b]
+                imb = pt[tb, PT_INV_MASS]
+                iib = pt[tb, PT_INV_INERTIA]
+                vbx = vx[b]
+                vby = vy[b]
+                wb = wz[b]
+            else:
+                imb = 0.0
+                iib = 0.0
+                vbx = ct[c, CT_BVX]
+                vby = ct[c, CT_BVY]
+                wb = ct[c, CT_BW]
+            vax = vx[a]
+            vay = vy[a]
+            wa = wz[a]
+            rax = ct[c, CT_RAX]
+            ray = ct[c, CT_RAY]
+            rbx = ct[c, CT_RBX]
+            rby = ct[c, CT_RBY]
+            nx = ct[c, CT_NX]
+            ny = ct[c, CT_NY]
+            # normal and tangential relative speeds from the same velocities; the tangential
+            # speed after the normal impulse follows algebraically (CT_CNT), which keeps the
+            # chain from one contact to the next short
+            ux = (vax - wa * ray) - (vbx - wb * rby)
+            uy = (vay + wa * rax) - (vby + wb * rbx)
+            un = ux * nx + uy * ny
+            ln = ct[c, CT_LN]
+            ln1 = max(ln + (min(ct[c, CT_BOUNCE], abs(un)) - un) * ct[c, CT_IKN], 0.0)
+            jn = ln1 - ln
+            ut = (uy * nx - ux * ny) + jn * ct[c, CT_CNT]
+            speed = abs(ut)
+            mu = (ct[c, CT_MU_S] + ct[c, CT_SLOPE] * speed if speed < ct[c, CT_V_T]
+                  else ct[c, CT_MU_K])
+            limit = mu * ln1
+            lt = ct[c, CT_LT]
+            dt = -ut * ct[c, CT_IKT]
+            jt = min(max(lt + dt, -limit), limit) - lt
+            # an increment between 0 and 2 dt does not add energy
+            # as far as an increment may go without adding energy: between 0 and 2 dt (where
+            # the cone shrank, the accumulated impulse stays outside until an increment may)
+            jt = min(max(jt, min(0.0, 2.0 * dt)), max(0.0, 2.0 * dt))
+            lt1 = lt + jt
+            ct[c, CT_LN] = ln1
+            ct[c, CT_LT] = lt1
+            # total impulse along x, y (t = (-ny, nx)) and its moments
+            px = jn * nx - jt * ny
+            py = jn * ny + jt * nx
+            vx[a] = vax + px * ima
+            vy[a] = vay + py * ima
+            wz[a] = wa + iia * (rax * py - ray * px)
+            if b >= 0:
+                vx[b] = vbx - px * imb
+                vy[b] = vby - py * imb
+                wz[b] = wb - iib * (rbx * py - rby * px)
+            if track:
+                acc[A_CONTACT_FRICTION] += abs(jt * ut)
+            if last:
+                prev[c, PV_KA] = ct[c, CT_KA]
+                prev[c, PV_KB] = ct[c, CT_KB]
+                prev[c, PV_LN] = ln1
+                prev[c, PV_LT] = lt1
+    prev[prev.shape[0] - 1, 0] = nc
+
+
+@njit(cache=True)
+def correct_positions(nc, ct, cidx, ptype, x, y, x0, y0, pt, passes, mp):
+    """Push overlapping bodies apart along the contact normals (translation only).
+
+    The depth of each contact is estimated from its detected depth and how far its bodies
+    moved since (``x0``, ``y0``: positions at detection); each of ``passes`` sweeps removes
+    ``mp[MP_CORRECTION]`` of the excess over the slop, in inverse-mass proportion (a fixed or
+    kinematic body does not move), so the centre of mass stays. Velocities are not touched: the
+    correction neither changes momentum nor adds kinetic energy. The shares come from
+    :func:`prepare_contacts` (no division in the chain).
+    """
+    slop = mp[MP_SLOP]
+    for it in range(passes):
+        # branch-free per contact, as in solve_impulses (no excess: a zero move)
+        for c in range(nc):
+            a = cidx[c, 0]
+            b = cidx[c, 1]
+            nx = ct[c, CT_NX]
+            ny = ct[c, CT_NY]
+            moved = nx * (x[a] - x0[a]) + ny * (y[a] - y0[a])
+            wa = ct[c, CT_WA]
+            wb = ct[c, CT_WB]
+            if b >= 0:
+                moved -= nx * (x[b] - x0[b]) + ny * (y[b] - y0[b])
+            excess = max(ct[c, CT_DEPTH] - moved - slop, 0.0)
+            x[a] += nx * excess * wa
+            y[a] += ny * excess * wa
+            if b >= 0:
+                x[b] -= nx * excess * wb
+                y[b] -= ny * excess * wb
+
+
