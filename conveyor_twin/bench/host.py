@@ -4,8 +4,8 @@ The floor is a loop paced exactly like the twin's stepping thread but doing no w
 program (``paced_floor.c``, built on first use with the system C compiler into ``build/`` of the
 source tree, or the user's cache directory) that sleeps to absolute 1 ms deadlines with
 ``clock_nanosleep(TIMER_ABSTIME)``, wakes 150 us early and spins to the deadline, runs late steps
-back to back, under SCHED_FIFO and holding a request for zero CPU wake-up latency where
-permitted (as the twin's pacer does). Every overrun it sees is time the kernel or (on a
+back to back, under SCHED_FIFO where permitted, and holding a request for zero CPU wake-up
+latency where the twin's pacer would (``CONVEYOR_TWIN_CPU_LATENCY_REQUEST=1``). Every overrun it sees is time the kernel or (on a
 virtual machine) the hypervisor did not give it, which no 1 kHz loop on the machine can avoid:
 ``bench twin`` reports the twin's overruns as a ratio to this floor, measured in windows
 interleaved with the twin's.

@@ -4,9 +4,9 @@
  * Absolute deadlines t0 + k * period on CLOCK_MONOTONIC; before each deadline the loop sleeps
  * with clock_nanosleep(TIMER_ABSTIME) to SPIN_NS before it, then spins to the deadline; a step
  * that ends after its deadline is an overrun and the late steps run back to back (no skipping),
- * as the twin's pacer does. Under SCHED_FIFO when permitted, and, like the twin's pacer, holding
- * a request for zero CPU wake-up latency (/dev/cpu_dma_latency) when permitted, unless the
- * environment sets CONVEYOR_TWIN_CPU_LATENCY_REQUEST=0. Whatever overruns this loop sees, no
+ * as the twin's pacer does. Under SCHED_FIFO when permitted; like the twin's pacer, it holds a
+ * request for zero CPU wake-up latency (/dev/cpu_dma_latency) when the environment sets
+ * CONVEYOR_TWIN_CPU_LATENCY_REQUEST=1 and the device is writable. Whatever overruns this loop sees, no
  * 1 kHz loop on the machine can avoid: it is the host's floor.
  *
  * usage: paced_floor SECONDS [PERIOD_NS] [FIFO_PRIORITY]
@@ -62,7 +62,7 @@ int main(int argc, char **argv)
     }
     const char *latency = "off";
     const char *setting = getenv("CONVEYOR_TWIN_CPU_LATENCY_REQUEST");
-    if (!setting || strcmp(setting, "0") != 0) {
+    if (setting && strcmp(setting, "1") == 0) {
         int fd = open("/dev/cpu_dma_latency", O_WRONLY); /* held until the process ends */
         int32_t zero = 0;
         latency = fd >= 0 && write(fd, &zero, sizeof zero) == sizeof zero ? "held" : "refused";

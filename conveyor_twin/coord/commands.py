@@ -13,6 +13,11 @@ import threading
 from typing import Deque, Dict, List, Tuple
 
 from conveyor_twin.cell.model import Cell, Mode
+from conveyor_twin.contract import ACTUATOR_COMMAND, BELT_COMMAND
+
+# the command topics' names, as rejection texts start with them
+BELT_TOPIC = BELT_COMMAND.name
+ACTUATOR_TOPIC = ACTUATOR_COMMAND.name
 
 
 class CommandKind(Mode):
@@ -92,16 +97,16 @@ class CommandBook:
         command carried them) or raise :class:`CommandRejected`."""
         if belt not in self._belts:
             known = ', '.join(self._belts)
-            raise self.reject('unknown_belt', f'belt_command: unknown belt {belt!r} '
+            raise self.reject('unknown_belt', f'{BELT_TOPIC}: unknown belt {belt!r} '
                                f'(known: {known})')
         index, max_speed = self._belts[belt]
         if not math.isfinite(speed):
-            raise self.reject('not_finite', f'belt_command: speed {speed!r} for belt {belt!r} '
+            raise self.reject('not_finite', f'{BELT_TOPIC}: speed {speed!r} for belt {belt!r} '
                                'is not finite')
         if abs(speed) > max_speed:
-            raise self.reject('out_of_range', f'belt_command: speed {speed!r} m/s for belt '
+            raise self.reject('out_of_range', f'{BELT_TOPIC}: speed {speed!r} m/s for belt '
                                f'{belt!r} is outside [{-max_speed:g}, {max_speed:g}] m/s')
-        self._check_origin('belt_command', sender, sequence)
+        self._check_origin(BELT_TOPIC, sender, sequence)
         return Command(CommandKind.BELT, belt, index, float(speed), -1, sender, sequence)
 
     def validate_actuator(self, actuator: str, position: float, sender: str = '',
@@ -110,17 +115,17 @@ class CommandBook:
         ``sequence`` as the command carried them) or raise :class:`CommandRejected`."""
         if actuator not in self._actuators:
             known = ', '.join(self._actuators) or 'none'
-            raise self.reject('unknown_actuator', f'actuator_command: unknown actuator '
+            raise self.reject('unknown_actuator', f'{ACTUATOR_TOPIC}: unknown actuator '
                                f'{actuator!r} (known: {known})')
         index, low, high, unit = self._actuators[actuator]
         if not math.isfinite(position):
-            raise self.reject('not_finite', f'actuator_command: position {position!r} for '
+            raise self.reject('not_finite', f'{ACTUATOR_TOPIC}: position {position!r} for '
                                f'actuator {actuator!r} is not finite')
         if not low <= position <= high:
-            raise self.reject('out_of_range', f'actuator_command: position {position!r} '
+            raise self.reject('out_of_range', f'{ACTUATOR_TOPIC}: position {position!r} '
                                f'{unit} for actuator {actuator!r} is outside '
                                f'[{low:g}, {high:g}] {unit}')
-        self._check_origin('actuator_command', sender, sequence)
+        self._check_origin(ACTUATOR_TOPIC, sender, sequence)
         return Command(CommandKind.ACTUATOR, actuator, index, float(position), -1, sender, sequence)
 
     def submit(self, command: Command) -> None:

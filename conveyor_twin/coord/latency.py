@@ -2,11 +2,12 @@
 hand at its deadline.
 
 - :class:`WakeLatencyRequest` holds a PM QoS request for zero CPU wake-up latency
-  (``/dev/cpu_dma_latency``, as ``cyclictest`` does) while a realtime loop runs: idle CPUs then
-  poll instead of halting, so a sleeping loop wakes within microseconds. On a virtual machine a
-  halted virtual CPU waits for the hypervisor to schedule it again, which is where most wake-ups
-  later than a few hundred microseconds come from. It needs write access to the device (root or
-  a udev rule); without it the loop runs as before and the request reports why.
+  (``/dev/cpu_dma_latency``, as ``cyclictest`` does) while a realtime loop runs, when asked
+  for with :data:`LATENCY_ENV` ``=1``: idle CPUs then poll instead of halting, so a sleeping
+  loop wakes within microseconds. It is off by default: on a virtual machine the polling CPUs
+  look busy to the hypervisor, which then preempts them more (docs/benchmarks.md, "Where late
+  steps come from"). It needs write access to the device (root or a udev rule); without it the
+  loop runs as before and the request reports why.
 - :func:`sleep_holding_gil` sleeps to an absolute deadline *without* releasing Python's
   interpreter lock, so no other thread of the process can take it in the last few hundred
   microseconds before a step: the step starts at its deadline instead of after another thread's
@@ -22,7 +23,7 @@ from typing import Callable, Optional
 
 #: Device of the kernel's CPU wake-up latency request (PM QoS) [us, int32].
 CPU_LATENCY_DEVICE = '/dev/cpu_dma_latency'
-#: Set to ``0`` to leave the CPUs' idle states alone while the twin runs in realtime.
+#: Set to ``1`` to hold the zero wake-up latency request while the twin runs in realtime.
 LATENCY_ENV = 'CONVEYOR_TWIN_CPU_LATENCY_REQUEST'
 _CLOCK_MONOTONIC = 1
 _TIMER_ABSTIME = 1
@@ -51,8 +52,8 @@ class WakeLatencyRequest:
         """Ask for zero wake-up latency; return True if the request is held."""
         if self._fd is not None:
             return True
-        if os.environ.get(LATENCY_ENV, '1').strip() == '0':
-            self.status = f'off ({LATENCY_ENV}=0)'
+        if os.environ.get(LATENCY_ENV, '0').strip() != '1':
+            self.status = f'off (set {LATENCY_ENV}=1 to request it)'
             return False
         try:
             fd = os.open(CPU_LATENCY_DEVICE, os.O_WRONLY)

@@ -30,8 +30,8 @@ class DeadlinePacer:
 
     Between steps the pacer sleeps with the interpreter lock released (other threads publish,
     record, serve) until :data:`APPROACH_NS` before the deadline, then sleeps the rest holding
-    the lock, so the step starts at its deadline with the lock in hand. A realtime loop holds
-    :attr:`latency_request` (zero CPU wake-up latency,
+    the lock, so the step starts at its deadline with the lock in hand. A realtime loop asks
+    for :attr:`latency_request` (zero CPU wake-up latency, opt-in:
     :class:`~conveyor_twin.coord.latency.WakeLatencyRequest`) while it paces, until
     :meth:`close`.
 

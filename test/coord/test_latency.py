@@ -19,7 +19,7 @@ def test_request_writes_zero_and_holds_the_device_until_released(tmp_path, monke
     device = tmp_path / 'cpu_dma_latency'
     device.write_bytes(b'')
     monkeypatch.setattr(latency, 'CPU_LATENCY_DEVICE', str(device))
-    monkeypatch.delenv(LATENCY_ENV, raising=False)
+    monkeypatch.setenv(LATENCY_ENV, '1')
     request = WakeLatencyRequest()
     assert request.acquire() and request.held and request.status == 'held'
     assert struct.unpack('i', device.read_bytes()) == (0,)
@@ -32,21 +32,26 @@ def test_request_writes_zero_and_holds_the_device_until_released(tmp_path, monke
 def test_refused_request_names_the_device_and_the_reason(tmp_path, monkeypatch):
     missing = tmp_path / 'no_such_device'
     monkeypatch.setattr(latency, 'CPU_LATENCY_DEVICE', str(missing))
-    monkeypatch.delenv(LATENCY_ENV, raising=False)
+    monkeypatch.setenv(LATENCY_ENV, '1')
     request = WakeLatencyRequest()
     assert not request.acquire()
     assert not request.held
     assert str(missing) in request.status and request.status.startswith('refused')
 
 
-def test_request_can_be_switched_off(tmp_path, monkeypatch):
+@pytest.mark.parametrize('setting', [None, '0', 'yes'])
+def test_request_is_off_unless_asked_for(tmp_path, monkeypatch, setting):
     device = tmp_path / 'cpu_dma_latency'
     device.write_bytes(b'')
     monkeypatch.setattr(latency, 'CPU_LATENCY_DEVICE', str(device))
-    monkeypatch.setenv(LATENCY_ENV, '0')
+    if setting is None:
+        monkeypatch.delenv(LATENCY_ENV, raising=False)
+    else:
+        monkeypatch.setenv(LATENCY_ENV, setting)
     request = WakeLatencyRequest()
     assert not request.acquire()
-    assert request.status.startswith('off') and device.read_bytes() == b''
+    assert request.status.startswith('off') and LATENCY_ENV in request.status
+    assert device.read_bytes() == b''
 
 
 @pytest.mark.parametrize('mode', [TimeMode.REALTIME, TimeMode.FAST])
@@ -54,7 +59,7 @@ def test_runner_holds_the_request_only_while_it_paces_in_realtime(tmp_path, monk
     device = tmp_path / 'cpu_dma_latency'
     device.write_bytes(b'')
     monkeypatch.setattr(latency, 'CPU_LATENCY_DEVICE', str(device))
-    monkeypatch.delenv(LATENCY_ENV, raising=False)
+    monkeypatch.setenv(LATENCY_ENV, '1')
     held = []
     twin = _CountingTwin(on_step=lambda: held.append(runner.pacer.latency_request.held))
     runner = Runner(twin, mode, max_steps=20)
