@@ -16,7 +16,7 @@ MID_MACRO = [{'name': 'up', 'policy': 'micro', 'region': [0.0, -0.25, 1.5, 0.25]
              {'name': 'down', 'policy': 'micro', 'region': [2.5, -0.25, 6.0, 0.25]}]
 
 
-def _macro_cell():
+def mid_macro_cell():
     d = yaml.safe_load(default_cell_text())
     d['sources'][0]['rate'] = 200.0
     d['zones'] = MID_MACRO
@@ -36,7 +36,7 @@ def test_composed_steps_micro_macro_then_the_coupling_built_with_both() -> None:
 
 
 def test_composed_publishes_the_barriers_of_macro_zones_from_the_density() -> None:
-    built = build_twin(_macro_cell(), seed=1)
+    built = build_twin(mid_macro_cell(), seed=1)
     assert [b.index for b in built.coupling.barriers] == [0]
     built.step(8000)  # the first parts reach the beam (x = 2.0) after about 4 s
     macro_count = int(built.coupling.barriers[0].edge_count)
@@ -46,7 +46,7 @@ def test_composed_publishes_the_barriers_of_macro_zones_from_the_density() -> No
 
 
 def test_macro_counters_carry_the_ledger_only_where_the_hand_over_runs() -> None:
-    coupled = build_twin(_macro_cell(), seed=1)
+    coupled = build_twin(mid_macro_cell(), seed=1)
     coupled.step(500)
     counters = coupled.macro_counters()
     assert abs(counters['balance_residual']) <= 1e-9 and counters['balance_entered'] > 0
@@ -67,7 +67,7 @@ def test_spawn_places_a_checked_request_and_the_part_check_sees_it() -> None:
 
 
 def test_reset_rebinds_the_coupling_and_its_barriers() -> None:
-    built = build_twin(_macro_cell(), seed=1)
+    built = build_twin(mid_macro_cell(), seed=1)
     built.step(800)
     before = built.coupling.barriers[0]
     built.twin.reset(seed=5)

@@ -4,10 +4,8 @@ roles talk only bytes (an in-memory transport), and give the composed twin's sta
 from typing import Callable, Dict, List, Set
 
 import pytest
-import yaml
 
 from conveyor_twin.cell import load_cell
-from conveyor_twin.cell.loader import cell_from_mapping, default_cell_text
 from conveyor_twin.coord.assembly import build_twin
 from conveyor_twin.coord.layout import Layout, Role
 from conveyor_twin.coord.requests import check_spawn
@@ -16,16 +14,7 @@ from conveyor_twin.output.producers import MacroOutput, MicroOutput
 from conveyor_twin.split.remote import RemoteStage
 from conveyor_twin.split.roles import build_scale_role, CoordinatorRole, MacroRole, MicroRole
 
-MID_MACRO = [{'name': 'up', 'policy': 'micro', 'region': [0.0, -0.25, 1.5, 0.25]},
-             {'name': 'mid', 'policy': 'macro', 'region': [1.5, -0.25, 2.5, 0.25]},
-             {'name': 'down', 'policy': 'micro', 'region': [2.5, -0.25, 6.0, 0.25]}]
-
-
-def _macro_cell():
-    d = yaml.safe_load(default_cell_text())
-    d['sources'][0]['rate'] = 200.0
-    d['zones'] = MID_MACRO
-    return cell_from_mapping(d)
+from ..coord.test_assembly import mid_macro_cell
 
 
 class Link:
@@ -92,7 +81,7 @@ class Frames:
 
 
 def test_roles_hold_their_own_parts() -> None:
-    cell = _macro_cell()
+    cell = mid_macro_cell()
     coordinator, micro, macro = split_in_memory(cell, 2)
     assert coordinator.twin.stages == [coordinator.remote]
     assert isinstance(coordinator.remote, RemoteStage)
@@ -111,7 +100,7 @@ def test_roles_hold_their_own_parts() -> None:
 
 
 def test_reset_restarts_a_role_and_forgets_remote_barriers() -> None:
-    micro = MicroRole(_macro_cell(), seed=2)
+    micro = MicroRole(mid_macro_cell(), seed=2)
     micro.side.barriers.load([(0, True, 3)], [(0, True, 0.5)])
     assert micro.stage.barrier_blocked()[0]
     micro.reset(micro.cell, 9)
@@ -120,7 +109,7 @@ def test_reset_restarts_a_role_and_forgets_remote_barriers() -> None:
 
 
 def test_split_in_memory_equals_composed_bit_for_bit() -> None:
-    cell = _macro_cell()
+    cell = mid_macro_cell()
     composed = build_twin(cell, seed=3, check_balance=True)
     c_frames, s_frames = Frames(), Frames()
     c_out = TwinOutput([MicroOutput(composed.micro), MacroOutput(composed.macro)])
