@@ -17,13 +17,12 @@ from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.layout import Layout
 from conveyor_twin.coord.stages import MacroStage
 from conveyor_twin.coord.timing import TimeMode
-from conveyor_twin.split.launch import launch, log_tail, ros_args, SplitProcesses
+from conveyor_twin.split.launch import launch, ros_args, SplitProcesses
 from conveyor_twin.testing.processes import RosProcesses
 
 #: The layouts a lockstep twin can run in.
 LAYOUTS = tuple(Layout)
-__all__ = ['density_per_step', 'Layout', 'LAYOUTS', 'log_tail', 'RunningLayout',
-           'start_layout']
+__all__ = ['density_per_step', 'LAYOUTS', 'RunningLayout', 'start_layout']
 
 
 def density_per_step(cell: Cell) -> int:

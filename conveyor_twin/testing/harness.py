@@ -19,8 +19,9 @@ from typing import Any, Optional, Union
 
 from conveyor_twin.cell import load_cell
 from conveyor_twin.cell.model import Cell
+from conveyor_twin.coord.layout import Layout
 from conveyor_twin.testing import checks
-from conveyor_twin.testing._layout import Layout, LAYOUTS
+from conveyor_twin.testing._layout import LAYOUTS
 from conveyor_twin.testing.acting import Acting
 from conveyor_twin.testing.controllers import Controllers
 from conveyor_twin.testing.driver import TIMEOUT

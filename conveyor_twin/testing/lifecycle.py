@@ -21,8 +21,8 @@ from rclpy.signals import SignalHandlerOptions
 
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.health import BackgroundFailure
-from conveyor_twin.testing._layout import (density_per_step, Layout, RunningLayout,
-                                           start_layout)
+from conveyor_twin.coord.layout import Layout
+from conveyor_twin.testing._layout import density_per_step, RunningLayout, start_layout
 from conveyor_twin.testing.driver import Driver
 from conveyor_twin.testing.errors import ConditionNotMet, TwinClosedError, TwinTimeoutError
 from conveyor_twin.testing.processes import RosProcesses

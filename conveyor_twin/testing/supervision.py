@@ -14,7 +14,8 @@ from typing import List, Mapping, Optional, Sequence
 
 from conveyor_twin import contract
 from conveyor_twin.health import BackgroundFailure, Health
-from conveyor_twin.testing._layout import log_tail, RunningLayout
+from conveyor_twin.split.launch import log_tail
+from conveyor_twin.testing._layout import RunningLayout
 from conveyor_twin.testing.driver import command_origin, Driver
 from conveyor_twin.testing.pacing import AckListener
 from conveyor_twin.testing.processes import RosProcesses
