@@ -58,6 +58,8 @@ setup(
          sorted(glob(f'{PACKAGE_NAME}/cell/examples/*.yaml'))),
     ],
     install_requires=['setuptools'],
+    # the PLC servers (conveyor-twin run --opcua / --modbus; docs/plc.md)
+    extras_require={'plc': ['asyncua>=2.1,<3', 'pymodbus>=3.16,<4']},
     zip_safe=False,
     maintainer='conveyor_twin maintainers',
     maintainer_email='maintainers@conveyor-twin.org',

@@ -12,7 +12,7 @@ MAX_PARAMETERS = 15
 ROOT = Path(conveyor_twin.__file__).resolve().parent
 #: The layers of docs/architecture.md, bottom up: a package imports only from lower rows.
 LAYERS = (('contract', 'cell', 'wire', 'health', 'numba_cache'), ('micro', 'macro'), ('faults',),
-          ('coupling',), ('coord',), ('output', 'plant'), ('record', 'split'), ('viz',), ('ros',),
+          ('coupling',), ('coord',), ('output', 'plant'), ('record', 'split'), ('viz', 'plc'), ('ros',),
           ('testing',), ('cli', 'bench'))
 #: The layers that may import rclpy and the ROS message packages.
 ROS_LAYERS = ('ros', 'testing', 'cli', 'bench')
