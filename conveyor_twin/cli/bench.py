@@ -16,6 +16,7 @@ BENCHES = {
     'soak': 'conveyor_twin.bench.soak',
     'testing': 'conveyor_twin.bench.testing',
     'plant': 'conveyor_twin.bench.plant',
+    'plc': 'conveyor_twin.bench.plc',
 }
 
 

@@ -52,7 +52,12 @@ class Command:
 
 
 class CommandRejected(ValueError):
-    """A command failed validation; the message says why."""
+    """A command failed validation; the message says why, ``reason`` is the counter's key
+    (``'out_of_range'``, ``'not_finite'``, ``'unknown_belt'``, ...; '' if not counted)."""
+
+    def __init__(self, message: str, reason: str = '') -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 class CommandBook:
@@ -81,7 +86,7 @@ class CommandBook:
         with self._lock:
             self.rejected[reason] += 1
             self.last_rejection = message
-        return CommandRejected(message)
+        return CommandRejected(message, reason)
 
     def _check_origin(self, topic: str, sender: str, sequence: int) -> None:
         if not isinstance(sender, str):
