@@ -1,20 +1,23 @@
-"""Build binary wheels of conveyor_twin that carry the message package (no ROS install needed).
+"""Build binary wheels of conveyor_twin that carry the interface packages (no ROS install needed).
 
     python tools/build_wheel.py [--distro jazzy|kilted|all] [--python 3.11|3.12|PATH|all]
                                 [--out dist]
 
 For each distro and Python this writes
 ``dist/conveyor_twin-<version>+<distro>-cpXY-cpXY-manylinux_2_28_x86_64.whl``: the
-``conveyor_twin`` package (console scripts, pytest plugin, cells) and ``conveyor_twin_msgs``
-(Python modules, typesupport libraries, ament index entries), declaring the ROS 2 wheels of
-``requirements/<distro>.txt`` as dependencies. Steps, each reused while its inputs are unchanged:
+``conveyor_twin`` package (console scripts, pytest plugin, cells), ``conveyor_twin_msgs`` and
+``simulation_interfaces`` (Python modules, typesupport libraries, ament index entries),
+declaring the ROS 2 wheels of ``requirements/<distro>.txt`` as dependencies. Steps, each reused
+while its inputs are unchanged:
 
 1. a build environment with the distro's ROS wheels for that Python: ``.venv-<distro>`` when
    ``make setup`` made it for the same Python, else ``build/wheel/<distro>-cpXY/env``;
-2. ``msg_defs/`` built with cmake + make into ``build/wheel/<distro>-cpXY/stage``, its libraries
-   kept within the manylinux_2_28 policy (``tools/wheelbuild/glibcxx_compat.cpp``) and compiled
-   with the source paths mapped away; ``make setup``'s own build (``build/msg_defs-<distro>``,
-   built the same way) is installed from instead when it is current;
+2. ``msg_defs/`` and ``interfaces/simulation_interfaces/`` built with cmake + make into
+   ``build/wheel/<distro>-cpXY/stage``, their libraries kept within the manylinux_2_28 policy
+   (``tools/wheelbuild/glibcxx_compat.cpp``) and compiled with the source paths mapped away;
+   ``make setup``'s own builds (``build/msg_defs-<distro>``,
+   ``build/simulation_interfaces-<distro>``, built the same way) are installed from instead when
+   they are current;
 3. the pure ``conveyor_twin`` wheel from setup.py (``pip wheel``, PEP 517, from a copy of the
    sources), then the binary wheel assembled from both (``tools/wheelbuild/assemble.py``);
 4. checked: no path of this machine in any file, every library within manylinux_2_28
@@ -45,6 +48,9 @@ from wheelbuild.metadata import DISTROS, ROOT, check_distro, read_pins  # noqa: 
 
 PYTHONS = ('3.11', '3.12')
 COMPAT = ROOT / 'tools' / 'wheelbuild' / 'glibcxx_compat.cpp'
+#: The interface packages the wheel carries: (source directory, name of its build and stamp).
+INTERFACE_SOURCES = (('msg_defs', 'msg_defs'),
+                     ('interfaces/simulation_interfaces', 'simulation_interfaces'))
 #: What goes into the pure wheel's source copy (setup.py's inputs).
 SOURCES = ('setup.py', 'setup.cfg', 'package.xml', 'resource', 'conveyor_twin', 'msg_defs')
 IGNORED = shutil.ignore_patterns('__pycache__', '*.pyc', '*.nbi', '*.nbc', '*.egg-info')
@@ -197,70 +203,88 @@ def setup_req_hash(distro: str) -> str:
     return _sha256sum(['requirements/common.txt', f'requirements/{distro}.txt'])
 
 
-def setup_msg_hash(distro: str) -> str:
-    """Return the hash tools/setup_env.sh stamps its build of msg_defs/ with, for the sources
-    and requirements as they are now."""
-    tree = sorted((str(p.relative_to(ROOT)) for p in (ROOT / 'msg_defs').rglob('*')
+def setup_msg_hash(distro: str, source: str = 'msg_defs') -> str:
+    """Return the hash tools/setup_env.sh stamps its build of an interface package with (by
+    default msg_defs/), for the sources and requirements as they are now."""
+    tree = sorted((str(p.relative_to(ROOT)) for p in (ROOT / source).rglob('*')
                    if p.is_file()), key=lambda name: name.encode())
     value = f'{_sha256sum(tree)} {setup_req_hash(distro)} {ROOT}/.venv-{distro}'
     return hashlib.sha256(value.encode()).hexdigest()
 
 
 def setup_stage(distro: str, version: str, work: Path) -> Optional[Path]:
-    """Install ``make setup``'s build of msg_defs/ into ``work/setup-stage`` and return it, if
-    that build is current, for this Python and built as for a wheel; else return None."""
+    """Install ``make setup``'s builds of the interface packages into ``work/setup-stage`` and
+    return it, if those builds are current, for this Python and built as for a wheel; else
+    return None."""
     dev = ROOT / f'.venv-{distro}'
-    build = ROOT / 'build' / f'msg_defs-{distro}'
-    cache = build / 'CMakeCache.txt'
-    if not (stamp_ok(dev / '.setup' / 'env', f'distro={distro} python={version}\n')
-            and stamp_ok(dev / '.setup' / 'msg_defs', setup_msg_hash(distro) + '\n')
-            and cache.is_file() and 'libglibcxx_compat.a' in cache.read_text()):
+    if not stamp_ok(dev / '.setup' / 'env', f'distro={distro} python={version}\n'):
         return None
+    for source, name in INTERFACE_SOURCES:
+        cache = ROOT / 'build' / f'{name}-{distro}' / 'CMakeCache.txt'
+        if not (stamp_ok(dev / '.setup' / name, setup_msg_hash(distro, source) + '\n')
+                and cache.is_file() and 'libglibcxx_compat.a' in cache.read_text()):
+            return None
     stage = work / 'setup-stage'
     shutil.rmtree(stage, ignore_errors=True)
     log = work / 'setup-stage.log'
     log.unlink(missing_ok=True)
-    run(['cmake', '--install', build, '--prefix', stage], log,
-        f'installing build/msg_defs-{distro} into {stage}')
-    say(f'conveyor_twin_msgs: reusing make setup\'s current build/msg_defs-{distro}')
+    for source, name in INTERFACE_SOURCES:
+        run(['cmake', '--install', ROOT / 'build' / f'{name}-{distro}', '--prefix', stage], log,
+            f'installing build/{name}-{distro} into {stage}')
+        say(f'{source}/: reusing make setup\'s current build/{name}-{distro}')
     return stage
 
 
-def build_messages(distro: str, env: Path, version: str, work: Path, jobs: int) -> Path:
-    """Build msg_defs/ against ``env`` and install it into ``work/stage``; return the stage."""
-    build, stage = work / 'msg_defs', work / 'stage'
+def _cmake_command(source: str, build: Path, stage: Path, env: Path) -> List[object]:
+    """Return the cmake configure command of one interface package, built as for a wheel."""
     compat = build / 'libglibcxx_compat.a'
     cc = os.environ.get('CC', 'cc')
     cxx = os.environ.get('CXX', 'c++')
     # Source and build paths must not end up in the libraries (__FILE__ in error messages).
     mapping = f'-ffile-prefix-map={build}=. -ffile-prefix-map={ROOT}=.'
-    cmake = ['cmake', '-S', ROOT / 'msg_defs', '-B', build, f'-DCMAKE_INSTALL_PREFIX={stage}',
-             '-DCMAKE_BUILD_TYPE=Release', '-DBUILD_TESTING=OFF', f'-DCMAKE_C_COMPILER={cc}',
-             f'-DCMAKE_CXX_COMPILER={cxx}', f'-DPython3_EXECUTABLE={env / "bin" / "python"}',
-             '-DPython3_FIND_VIRTUALENV=ONLY', f'-DCMAKE_C_FLAGS={mapping}',
-             f'-DCMAKE_CXX_FLAGS={mapping}', f'-DCMAKE_CXX_STANDARD_LIBRARIES={compat}',
-             '-DCMAKE_SHARED_LINKER_FLAGS=-Wl,--exclude-libs,libglibcxx_compat.a']
+    return ['cmake', '-S', ROOT / source, '-B', build, f'-DCMAKE_INSTALL_PREFIX={stage}',
+            '-DCMAKE_BUILD_TYPE=Release', '-DBUILD_TESTING=OFF', f'-DCMAKE_C_COMPILER={cc}',
+            f'-DCMAKE_CXX_COMPILER={cxx}', f'-DPython3_EXECUTABLE={env / "bin" / "python"}',
+            '-DPython3_FIND_VIRTUALENV=ONLY', f'-DCMAKE_C_FLAGS={mapping}',
+            f'-DCMAKE_CXX_FLAGS={mapping}', f'-DCMAKE_CXX_STANDARD_LIBRARIES={compat}',
+            '-DCMAKE_SHARED_LINKER_FLAGS=-Wl,--exclude-libs,libglibcxx_compat.a']
+
+
+def build_messages(distro: str, env: Path, version: str, work: Path, jobs: int) -> Path:
+    """Build the interface packages (:data:`INTERFACE_SOURCES`) against ``env`` and install them
+    into ``work/stage``; return the stage."""
+    stage = work / 'stage'
+    commands = {name: _cmake_command(source, work / name, stage, env)
+                for source, name in INTERFACE_SOURCES}
     stamp = work / 'stage.stamp'
-    value = digest([ROOT / 'msg_defs', COMPAT, ROOT / 'requirements' / f'{distro}.txt'],
-                   str(env), version, ' '.join(map(str, cmake)))
-    site = stage / 'lib' / f'python{version}' / 'site-packages' / 'conveyor_twin_msgs'
-    if stamp_ok(stamp, value) and site.is_dir():
-        say(f'conveyor_twin_msgs for {distro}, Python {version}: up to date')
+    value = digest([*(ROOT / source for source, _ in INTERFACE_SOURCES), COMPAT,
+                    ROOT / 'requirements' / f'{distro}.txt'], str(env), version,
+                   *(' '.join(map(str, c)) for c in commands.values()))
+    sites = [stage / 'lib' / f'python{version}' / 'site-packages' / package
+             for package in ('conveyor_twin_msgs', 'simulation_interfaces')]
+    if stamp_ok(stamp, value) and all(site.is_dir() for site in sites):
+        say(f'interface packages for {distro}, Python {version}: up to date')
         return stage
-    say(f'building conveyor_twin_msgs against ROS 2 {distro}, Python {version}')
-    for path in (build, stage):
-        shutil.rmtree(path, ignore_errors=True)
-    build.mkdir(parents=True)
-    log = build / 'build.log'
-    run([cxx, '-fPIC', '-O2', '-c', COMPAT, '-o', build / 'glibcxx_compat.o'], log,
-        'compiling glibcxx_compat.cpp')
-    run(['ar', 'rcs', compat, build / 'glibcxx_compat.o'], log, 'archiving glibcxx_compat.o')
+    shutil.rmtree(stage, ignore_errors=True)
+    cxx = os.environ.get('CXX', 'c++')
     environ = clean_environ(AMENT_PREFIX_PATH=str(env), CMAKE_PREFIX_PATH=str(env),
                             PATH=f'{env / "bin"}{os.pathsep}{os.environ["PATH"]}')
-    run(cmake, log, 'configuring msg_defs/', env=environ)
-    run(['make', '-C', build, f'-j{jobs}', 'install'], log, 'building msg_defs/', env=environ)
-    if not site.is_dir():
-        raise BuildError(f'msg_defs/ installed, but not into {site}; see {log}')
+    for source, name in INTERFACE_SOURCES:
+        say(f'building {source}/ against ROS 2 {distro}, Python {version}')
+        build = work / name
+        shutil.rmtree(build, ignore_errors=True)
+        build.mkdir(parents=True)
+        log = build / 'build.log'
+        run([cxx, '-fPIC', '-O2', '-c', COMPAT, '-o', build / 'glibcxx_compat.o'], log,
+            'compiling glibcxx_compat.cpp')
+        run(['ar', 'rcs', build / 'libglibcxx_compat.a', build / 'glibcxx_compat.o'], log,
+            'archiving glibcxx_compat.o')
+        run(commands[name], log, f'configuring {source}/', env=environ)
+        run(['make', '-C', build, f'-j{jobs}', 'install'], log, f'building {source}/',
+            env=environ)
+    missing = [str(site) for site in sites if not site.is_dir()]
+    if missing:
+        raise BuildError(f'the interface packages installed, but not into {missing}')
     stamp.write_text(value)
     return stage
 

@@ -46,7 +46,7 @@ USER_TEST_DEPENDENCIES = ('pytest', 'pytest-xdist')
 #: Inspects the new environment from inside (printed as JSON).
 PROBE = '''
 import importlib.metadata, json, os, sys
-import conveyor_twin, conveyor_twin_msgs.msg
+import conveyor_twin, conveyor_twin_msgs.msg, simulation_interfaces.srv
 from conveyor_twin.wire import msg_files, schemas
 from ament_index_python.packages import get_package_share_directory
 from rclpy.serialization import deserialize_message, serialize_message
@@ -59,6 +59,10 @@ print(json.dumps({
     'metadata_version': importlib.metadata.version('conveyor_twin'),
     'prefix': sys.prefix,
     'msg_defs': str(msg_files.contract_dir()),
+    'simulation_interfaces': [
+        simulation_interfaces.srv.__file__, get_package_share_directory('simulation_interfaces'),
+        deserialize_message(serialize_message(simulation_interfaces.srv.StepSimulation.Request(
+            steps=3)), simulation_interfaces.srv.StepSimulation.Request).steps],
     'schemas': schemas.SCHEMAS,
 }))
 '''
@@ -168,6 +172,10 @@ def test_the_wheel_installs_and_runs_in_a_clean_environment():
         assert Path(probe['msg_defs']).parts[-4:] == ('conveyor_twin', 'wire', 'msg',
                                                       'conveyor_twin_msgs')
         assert probe['schemas'] == SCHEMAS
+        # simulation_interfaces, built into the wheel (it has no PyPI wheel of its own)
+        module, share, steps = probe['simulation_interfaces']
+        assert Path(module).is_relative_to(site), module
+        assert (Path(share), steps) == (venv / 'share' / 'simulation_interfaces', 3)
 
         out = check(run([venv / 'bin' / 'conveyor-twin', '--version'], env=env, cwd=tmp,
                         timeout=RUN_TIMEOUT), 'conveyor-twin --version')
@@ -236,5 +244,8 @@ def test_the_wheel_depends_on_the_tested_ros_wheels(distro):
     for name in ('ros-rclpy', 'ros-rmw-fastrtps-cpp', 'ros-std-msgs', 'ros-std-srvs'):
         assert f'{name}=={pins[name]}' in requires
     assert f'numba~={pins["numba"]}' in requires
-    # The build chain and the test tools are not the package's dependencies.
-    assert not [r for r in requires if r.startswith(('ros-ament', 'ros-rosidl', 'pytest'))]
+    # The build chain and the test tools are not the package's dependencies, nor are the
+    # interface packages the wheel carries.
+    assert not [r for r in requires if r.startswith(('ros-ament', 'ros-rosidl', 'pytest',
+                                                     'ros-conveyor-twin-msgs',
+                                                     'ros-simulation-interfaces'))]

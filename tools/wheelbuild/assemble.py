@@ -1,14 +1,14 @@
-"""Assemble the binary wheel: the pure ``conveyor_twin`` wheel plus the built message package.
+"""Assemble the binary wheel: the pure ``conveyor_twin`` wheel plus the built interface packages.
 
 Layout of ``conveyor_twin-<version>+<distro>-cpXY-cpXY-manylinux_2_28_x86_64.whl``:
 
-- ``conveyor_twin/``, ``conveyor_twin_msgs/`` (Python modules and their extension modules) and
-  ``conveyor_twin_ament_prefix.pth`` in site-packages;
-- ``<name>.data/data/lib/libconveyor_twin_msgs__*.so`` (typesupport libraries): pip installs them
+- ``conveyor_twin/``, ``conveyor_twin_msgs/``, ``simulation_interfaces/`` (Python modules and
+  their extension modules) and ``conveyor_twin_ament_prefix.pth`` in site-packages;
+- ``<name>.data/data/lib/lib<package>__*.so`` (typesupport libraries): pip installs them
   into ``<venv>/lib``, which ros-wheels-bootstrapper puts on ``LD_LIBRARY_PATH`` when the venv's
   python starts, as it does for the ROS wheels' own libraries;
 - ``<name>.data/data/share/``: the ament index entries, ``package.xml`` and the interface files
-  of both packages, and the cells; the ``.pth`` file puts the venv prefix on ``AMENT_PREFIX_PATH``
+  of the packages, and the cells; the ``.pth`` file puts the venv prefix on ``AMENT_PREFIX_PATH``
   at every start of its python, so ament index lookups find them with nothing sourced.
 
 Headers and CMake files of the message package are left out: the wheel is for running the twin,
@@ -23,7 +23,8 @@ from pathlib import Path
 from typing import Dict, Iterator, List, Tuple
 import zipfile
 
-from .metadata import EXTRAS, MESSAGE_PACKAGE, PLATFORM_TAG, requires_dist, wheel_version
+from .metadata import (EXTRAS, INTERFACE_PACKAGES, MESSAGE_PACKAGE, PLATFORM_TAG, requires_dist,
+                       wheel_version)
 
 NAME = 'conveyor_twin'
 #: Same line as tools/setup_env.sh writes into a development environment.
@@ -39,35 +40,41 @@ INDEX_RESOURCES = ('packages', 'package_run_dependencies', 'rosidl_interfaces')
 
 
 def message_files(stage: Path, python: str) -> Iterator[Tuple[str, Path]]:
-    """Yield ``(path in the wheel, file)`` of the message package installed into ``stage``.
+    """Yield ``(path in the wheel, file)`` of every interface package installed into ``stage``
+    (:data:`INTERFACE_PACKAGES`).
 
-    :param python: ``X.Y`` of the interpreter it was built for.
+    :param python: ``X.Y`` of the interpreter they were built for.
     """
+    for package in INTERFACE_PACKAGES:
+        yield from _package_files(stage, python, package)
+
+
+def _package_files(stage: Path, python: str, package: str) -> Iterator[Tuple[str, Path]]:
     data = f'{NAME}-{{version}}.data/data'
-    site = stage / 'lib' / f'python{python}' / 'site-packages' / MESSAGE_PACKAGE
+    site = stage / 'lib' / f'python{python}' / 'site-packages' / package
     if not site.is_dir():
-        raise FileNotFoundError(f'{site} is missing: the message package was not built for '
+        raise FileNotFoundError(f'{site} is missing: {package} was not built for '
                                 f'Python {python}')
     for path in sorted(site.rglob('*')):
         if (path.is_file() and '__pycache__' not in path.parts
                 and path.suffix not in ('.c', '.pyc')):
-            yield f'{MESSAGE_PACKAGE}/{path.relative_to(site).as_posix()}', path
-    libs = sorted((stage / 'lib').glob(f'lib{MESSAGE_PACKAGE}__*.so'))
+            yield f'{package}/{path.relative_to(site).as_posix()}', path
+    libs = sorted((stage / 'lib').glob(f'lib{package}__*.so'))
     if not libs:
-        raise FileNotFoundError(f'{stage}/lib has no lib{MESSAGE_PACKAGE}__*.so')
+        raise FileNotFoundError(f'{stage}/lib has no lib{package}__*.so')
     for path in libs:
         yield f'{data}/lib/{path.name}', path
     index = stage / 'share' / 'ament_index' / 'resource_index'
     for resource in INDEX_RESOURCES:
-        path = index / resource / MESSAGE_PACKAGE
+        path = index / resource / package
         if path.is_file():
-            yield f'{data}/share/ament_index/resource_index/{resource}/{MESSAGE_PACKAGE}', path
-    share = stage / 'share' / MESSAGE_PACKAGE
-    yield f'{data}/share/{MESSAGE_PACKAGE}/package.xml', share / 'package.xml'
-    for sub in ('msg', 'srv'):
+            yield f'{data}/share/ament_index/resource_index/{resource}/{package}', path
+    share = stage / 'share' / package
+    yield f'{data}/share/{package}/package.xml', share / 'package.xml'
+    for sub in ('msg', 'srv', 'action'):
         for path in sorted((share / sub).glob('*')):
-            if path.suffix in ('.msg', '.srv', '.idl', '.json'):
-                yield f'{data}/share/{MESSAGE_PACKAGE}/{sub}/{path.name}', path
+            if path.suffix in ('.msg', '.srv', '.action', '.idl', '.json'):
+                yield f'{data}/share/{package}/{sub}/{path.name}', path
 
 
 def _record_hash(data: bytes) -> str:
@@ -84,7 +91,7 @@ def _metadata(text: str, version: str, distro: str) -> str:
     lines += [f'Provides-Extra: {extra}' for extra in EXTRAS]
     lines += [f'Requires-Dist: {req}' for req in requires_dist(distro)]
     summary = (f'Built for ROS 2 {distro.capitalize()} from the PyPI wheels; includes the '
-               f'message package {MESSAGE_PACKAGE}.\n')
+               f'message package {MESSAGE_PACKAGE} and simulation_interfaces.\n')
     return '\n'.join(lines) + '\n\n' + (body or summary)
 
 

@@ -23,6 +23,9 @@ EXTRAS = {'plot': ('matplotlib',), 'bench': ('pymunk', 'websockets')}
 #: The only RMW published as wheels; ros-rclpy does not pull it in.
 RMW = 'ros-rmw-fastrtps-cpp'
 MESSAGE_PACKAGE = 'conveyor_twin_msgs'
+#: Interface packages built into the wheel (never dependencies): the twin's own messages and
+#: simulation_interfaces, which has no PyPI wheel (interfaces/simulation_interfaces).
+INTERFACE_PACKAGES = (MESSAGE_PACKAGE, 'simulation_interfaces')
 
 
 def base_version() -> str:
@@ -71,11 +74,15 @@ def normalise(name: str) -> str:
 
 def ros_runtime_packages() -> List[str]:
     """Return the ROS wheels the package needs at run time: the ``exec_depend`` entries of
-    package.xml that are ROS packages (the message package is inside the wheel), and the RMW."""
+    package.xml that are ROS packages (the interface packages are inside the wheel), the
+    ``depend`` entries of the interface packages it carries, and the RMW."""
     root = ET.parse(ROOT / 'package.xml').getroot()
     names = [e.text.strip() for e in root.findall('exec_depend') if e.text]
+    for source in ('msg_defs', 'interfaces/simulation_interfaces'):
+        carried = ET.parse(ROOT / source / 'package.xml').getroot()
+        names += [e.text.strip() for e in carried.findall('depend') if e.text]
     wheels = ['ros-' + normalise(n) for n in names
-              if not n.startswith('python3-') and n != MESSAGE_PACKAGE]
+              if not n.startswith('python3-') and n not in INTERFACE_PACKAGES]
     return sorted(set(wheels + [RMW]))
 
 
