@@ -187,6 +187,8 @@ class Runner:
         self.tuned = True
         #: Called on the stepping thread after each call of ``twin.step``, outside its timing.
         self.listeners: List[Callable[[], None]] = []
+        self._paused = False
+        self._wall_before = 0.0  # wall time [s] stepped before the last pause
 
     @property
     def overruns(self) -> int:
@@ -233,8 +235,9 @@ class Runner:
             freeze_heap()
         if realtime:
             self.pacer.latency_request.acquire()
-        self.pacer.restart()
-        self.wall_start = time.monotonic()  # after the set-up above: rtf counts stepping only
+        self.pacer.restart()  # after a pause too: deadlines from now, no catch-up steps
+        # after the set-up above: rtf counts stepping only (not the set-up, not pauses)
+        self.wall_start = time.monotonic() - self._wall_before
         try:
             if self.gate is not None:
                 self._gated_loop(realtime)
@@ -312,8 +315,46 @@ class Runner:
 
     @property
     def running(self) -> bool:
-        """True while the stepping thread runs."""
-        return self._thread is not None and self._thread.is_alive()
+        """True while the stepping thread runs, or is paused (:meth:`pause`)."""
+        return self._paused or (self._thread is not None and self._thread.is_alive())
+
+    @property
+    def paused(self) -> bool:
+        """True between :meth:`pause` and :meth:`resume`."""
+        return self._paused
+
+    def pause(self) -> bool:
+        """Stop the stepping thread after the current step and hold the clock (realtime, fast).
+
+        Nothing is added to the step: the thread ends as at :meth:`stop`, and :meth:`resume`
+        starts it again with new realtime deadlines, so the pause is neither an overrun nor
+        followed by catch-up steps. While paused, :meth:`step` steps on request.
+
+        :return: True if the thread was stepping and is now paused; False if it was not
+            stepping (lockstep, not started, already paused, stopped or at ``max_steps``).
+        """
+        if self._paused or not (self._thread is not None and self._thread.is_alive()):
+            return False
+        self._stop.set()
+        self._thread.join()
+        self._paused = True
+        self._wall_before = self.wall_end - self.wall_start
+        return True
+
+    def resume(self) -> bool:
+        """Start stepping again after :meth:`pause` (no warm-up; new realtime deadlines).
+
+        :return: True if it resumed; False if it was not paused.
+        """
+        if not self._paused:
+            return False
+        self._paused = False
+        self.wall_end = 0.0
+        self._stop.clear()
+        self._thread = threading.Thread(target=self.run, name='conveyor_twin_steps',
+                                        daemon=True)
+        self._thread.start()
+        return True
 
     def wait(self, timeout: Optional[float] = None) -> bool:
         """Wait until the thread has stopped; return True if it has."""
@@ -328,7 +369,8 @@ class Runner:
         self._stop.set()
 
     def stop(self) -> None:
-        """Stop the stepping thread after the current step."""
+        """Stop the stepping thread after the current step (a paused runner stays stopped)."""
+        self._paused = False
         self._stop.set()
         self.wait(10.0)
         if not self.wall_end:

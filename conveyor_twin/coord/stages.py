@@ -164,12 +164,14 @@ class MicroStage:
             raise ValueError(f'nothing placed: {exc}') from None
 
     def counters(self) -> Dict[str, int]:
-        """Part balance: entered, left (through sinks), in flight, and vanished (fault
-        ``parts_vanish``) once a part fell off."""
+        """Part balance: entered, left (through sinks and deleted), in flight, vanished (fault
+        ``parts_vanish``) once a part fell off, deleted once a part was deleted."""
         c = self.sim.counters()
         out = {'entered': c['entered'], 'left': c['left'], 'in_flight': c['in_flight']}
         if c['vanished']:
             out['vanished'] = c['vanished']
+        if c['deleted']:  # included in left
+            out['deleted'] = c['deleted']
         return out
 
 

@@ -198,6 +198,8 @@ class MicroSim:
         self.rng = seed_streams(self.seed, cell.sources)
         self.sinks = np.array([s.region for s in cell.sinks], dtype=np.float64).reshape(-1, 4)
         self.sink_count = np.zeros(len(cell.sinks), dtype=np.int64)
+        #: Parts taken out by :meth:`delete` (counted as left in :meth:`counters`).
+        self.deleted = 0
         self.region_array = np.zeros(RG_SIZE)
         if region is not None:
             self.region_array[:] = (1.0, *region)
@@ -427,6 +429,24 @@ class MicroSim:
         self.state.counters[C_VANISHED] += k
         return k
 
+    def delete(self, ids: Sequence[int]) -> int:
+        """Take parts out of the cell by id, as if they had left through a sink (a delete
+        request): they count as ``left`` (and ``deleted``) in :meth:`counters`, not as
+        ``removed``, so the part ledger stays balanced; return how many were deleted.
+
+        :raises KeyError: naming the ids the cell does not hold now (nothing deleted).
+        """
+        wanted = np.unique(np.asarray(ids, dtype=np.uint32))
+        held = self.state.ids[:self.n]
+        missing = wanted[~np.isin(wanted, held)]
+        if missing.size:
+            raise KeyError(f'no part with id {missing.tolist()[:20]} in the micro scale; '
+                           'nothing deleted')
+        k = len(self.remove(wanted).id)
+        self.state.counters[C_REMOVED] -= k
+        self.deleted += k
+        return k
+
     def drain_outbox(self) -> PartsView:
         """Return copies of the parts that left the region since the last drain; empty it."""
         m = int(self.state.counters[C_OUTBOX])
@@ -453,9 +473,10 @@ class MicroSim:
 
     def counters(self) -> Dict[str, int]:
         """Return the part balance: entered = in_flight + left + handed_over + removed +
-        vanished."""
+        vanished (``left``: through sinks, plus ``deleted``)."""
         c = self.state.counters
-        return {'entered': int(c[C_ENTERED]), 'left': int(self.sink_count.sum()),
+        return {'entered': int(c[C_ENTERED]),
+                'left': int(self.sink_count.sum()) + self.deleted, 'deleted': self.deleted,
                 'in_flight': self.n, 'handed_over': int(c[C_REGION_LEFT]),
                 'removed': int(c[C_REMOVED]), 'vanished': int(c[C_VANISHED]),
                 'substeps': int(c[C_SUBSTEPS]),
@@ -498,7 +519,9 @@ class MicroSim:
                          self.act_v.tobytes(), self.blocked.tobytes(),
                          self.edge_count.tobytes(), self.src_next.tobytes(),
                          self.src_state.tobytes(), self.rng.tobytes(),
-                         self.sink_count.tobytes(), self.acc.tobytes()))
+                         self.sink_count.tobytes(), self.acc.tobytes(),
+                         # only after a delete: runs without one keep their bytes
+                         np.int64(self.deleted).tobytes() if self.deleted else b''))
 
     def state_hash(self) -> str:
         """Return the SHA-256 hex digest of :meth:`state_bytes`."""

@@ -272,6 +272,15 @@ class CoordinatorNode(Node):
         response.stamp = Time(sec=sec, nanosec=nanosec)
         return response
 
+    def reset_twin(self, request: Reset.Request) -> Reset.Response:
+        """Serve a ``reset`` request as the service does (also for the simulation interfaces)."""
+        return self._on_reset(request, Reset.Response())
+
+    def spawn_parts(self, request: SpawnParts.Request) -> SpawnParts.Response:
+        """Serve a ``spawn_parts`` request as the service does (also for the simulation
+        interfaces)."""
+        return self._on_spawn(request, SpawnParts.Response())
+
     def _on_reset(self, request: Reset.Request, response: Reset.Response) -> Reset.Response:
         try:
             cell = check_reset(self.twin.cell, request.cell_file)

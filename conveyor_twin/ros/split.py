@@ -26,6 +26,7 @@ from conveyor_twin.health import EXIT_BACKGROUND_FAILURE, Health
 from conveyor_twin.ros.compat import make_executor, spin_until
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
 from conveyor_twin.ros.qos import COUPLING_QOS
+from conveyor_twin.ros.sim_attach import attach_split_sim_interfaces
 from conveyor_twin.ros.standalone import start_process
 from conveyor_twin.split import topics
 from conveyor_twin.split.launch import check_scale_processes, scale_pids_from_env, SUMMARY_PREFIX
@@ -118,6 +119,7 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
                            holds_part=remote.holds_part, counters=remote.counters,
                            refresh=remote.counters)
     remote.warn = node.get_logger().warning
+    sim_interfaces = attach_split_sim_interfaces(node, context)  # no entities: parts are remote
     if scenario is not None:  # triggers read what the scale nodes measure after each step
         role.arm_scenario(scenario)
     executor = make_executor(context)
@@ -130,6 +132,8 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
                                  ('coupling executor thread', coupling_executor))]
     for spinner in spinners:
         spinner.start()
+    if sim_interfaces is not None:
+        sim_interfaces.start()
     stop = threading.Event()
     health.listeners.append(lambda failure: stop.set())
 
@@ -161,6 +165,8 @@ def coordinator_main(argv: Optional[List[str]] = None) -> int:
             check_scale_processes(health, remote.pids)
             stop.wait(WATCH_PERIOD)
         runner.stop()
+    if sim_interfaces is not None:  # no step on request after the run
+        sim_interfaces.stop()
     if health.failed:  # every failure (a step too) was reported once and logged at ERROR
         node.publish_diagnostics()
         code = EXIT_BACKGROUND_FAILURE
