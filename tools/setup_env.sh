@@ -17,13 +17,17 @@
 #   4. build msg_defs/ (conveyor_twin_msgs) with cmake + make in build/msg_defs-<distro> and
 #      install it into the environment's prefix itself: Python package in site-packages,
 #      typesupport libraries in lib/ (on the LD_LIBRARY_PATH that ros-wheels-bootstrapper sets
-#      when the venv's python starts), share/ and the ament index in share/;
+#      when the venv's python starts), share/ and the ament index in share/; then the same
+#      for interfaces/simulation_interfaces/ (simulation_interfaces) in
+#      build/simulation_interfaces-<distro>;
 #   5. add the prefix to AMENT_PREFIX_PATH of every start of the venv's python (a .pth file; the
 #      wheels only set LD_LIBRARY_PATH), so ament_index lookups find conveyor_twin_msgs and
 #      conveyor_twin;
 #   6. pip install -e . (the conveyor_twin package, console scripts in bin/), plus setup.py's
 #      data_files (ament index marker, package.xml, cells) into share/;
-#   7. point .venv at this environment.
+#   7. point .venv at this environment;
+#   8. compile the numba kernels into the environment's cache (conveyor-twin warm-up), so the
+#      first run and the first test start in seconds.
 #
 # Environment: ROS_DISTRO (jazzy, the default, or kilted), PYTHON (interpreter to create the
 # environment with; default python3.11, else python3.12, else python3), CC / CXX (compilers), JOBS
@@ -36,7 +40,6 @@ DISTRO=${ROS_DISTRO:-jazzy}
 VENV="$ROOT/.venv-$DISTRO"
 LINK="$ROOT/.venv"
 STAMPS="$VENV/.setup"
-MSG_BUILD="$ROOT/build/msg_defs-$DISTRO"
 REQUIREMENTS="requirements/$DISTRO.txt"
 export PIP_NO_INPUT=1 PIP_DISABLE_PIP_VERSION_CHECK=1
 START=$SECONDS
@@ -142,33 +145,39 @@ else
     say "requirements installed ($(elapsed))"
 fi
 
-# 3./4. conveyor_twin_msgs --------------------------------------------------------------------
+# 3./4. Interface packages ----------------------------------------------------------------------
 SITE=$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])' \
     < /dev/null)
-# Rebuilt when msg_defs/ changes, and when the wheels it links against (requirements) change.
-msg_hash=$(printf '%s %s %s' "$(hash_tree msg_defs)" "$req_hash" "$VENV" | sha256sum \
-    | cut -d' ' -f1)
-if stamp_ok msg_defs "$msg_hash" && [[ -d "$SITE/conveyor_twin_msgs" ]] \
-        && [[ -f "$VENV/share/ament_index/resource_index/packages/conveyor_twin_msgs" ]]; then
-    say 'conveyor_twin_msgs up to date'
-else
-    say "building msg_defs/ (conveyor_twin_msgs) against ROS 2 $DISTRO into $VENV"
+# build_interfaces PACKAGE SOURCE_DIR STAMP: build one rosidl package with cmake + make in
+# build/STAMP-<distro> and install it into the venv prefix. Rebuilt when its sources change, and
+# when the wheels it links against (requirements) change.
+build_interfaces() {
+    local pkg=$1 src=$2 stamp=$3
+    local build="$ROOT/build/$stamp-$DISTRO" hash
+    hash=$(printf '%s %s %s' "$(hash_tree "$src")" "$req_hash" "$VENV" | sha256sum \
+        | cut -d' ' -f1)
+    if stamp_ok "$stamp" "$hash" && [[ -d "$SITE/$pkg" ]] \
+            && [[ -f "$VENV/share/ament_index/resource_index/packages/$pkg" ]]; then
+        say "$pkg up to date"
+        return
+    fi
+    say "building $src/ ($pkg) against ROS 2 $DISTRO into $VENV"
     "$VENV/bin/python" "$ROOT/tools/patch_wheel_cmake.py" < /dev/null
-    rm -rf "$MSG_BUILD"
-    mkdir -p "$MSG_BUILD"
-    log="$MSG_BUILD/build.log"
-    jobs=${JOBS:-$(nproc 2> /dev/null || echo 2)}
+    rm -rf "$build"
+    mkdir -p "$build"
+    local log="$build/build.log"
+    local jobs=${JOBS:-$(nproc 2> /dev/null || echo 2)}
     # The wheels are found through the venv prefix; nothing of a system ROS is used. The
     # libraries are built as for a wheel (tools/build_wheel.py reuses this build): within the
     # manylinux_2_28 policy (tools/wheelbuild/glibcxx_compat.cpp), without source paths.
-    compat="$MSG_BUILD/libglibcxx_compat.a"
-    prefix_map="-ffile-prefix-map=$MSG_BUILD=. -ffile-prefix-map=$ROOT=."
+    local compat="$build/libglibcxx_compat.a"
+    local prefix_map="-ffile-prefix-map=$build=. -ffile-prefix-map=$ROOT=."
     if ! (
         export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
         unset PYTHONPATH
         "$cxx_found" -fPIC -O2 -c "$ROOT/tools/wheelbuild/glibcxx_compat.cpp" \
-            -o "$MSG_BUILD/glibcxx_compat.o" && ar rcs "$compat" "$MSG_BUILD/glibcxx_compat.o" \
-        && cmake -S "$ROOT/msg_defs" -B "$MSG_BUILD" \
+            -o "$build/glibcxx_compat.o" && ar rcs "$compat" "$build/glibcxx_compat.o" \
+        && cmake -S "$ROOT/$src" -B "$build" \
             -DCMAKE_INSTALL_PREFIX="$VENV" \
             -DCMAKE_BUILD_TYPE=Release \
             -DBUILD_TESTING=OFF \
@@ -179,17 +188,21 @@ else
             -DCMAKE_C_FLAGS="$prefix_map" -DCMAKE_CXX_FLAGS="$prefix_map" \
             -DCMAKE_CXX_STANDARD_LIBRARIES="$compat" \
             -DCMAKE_SHARED_LINKER_FLAGS=-Wl,--exclude-libs,libglibcxx_compat.a \
-        && make -C "$MSG_BUILD" -j"$jobs" install
+        && make -C "$build" -j"$jobs" install
     ) < /dev/null > "$log" 2>&1; then
         tail -n 40 "$log" >&2
-        die "building msg_defs/ failed; full log: $log"
+        die "building $src/ failed; full log: $log"
     fi
     # The generated Python package must be where the venv's python imports from.
-    [[ -d "$SITE/conveyor_twin_msgs" ]] \
-        || die "msg_defs/ installed, but not into $SITE/conveyor_twin_msgs; see $log"
-    stamp_write msg_defs "$msg_hash"
-    say "conveyor_twin_msgs installed into $VENV ($(elapsed))"
-fi
+    [[ -d "$SITE/$pkg" ]] || die "$src/ installed, but not into $SITE/$pkg; see $log"
+    stamp_write "$stamp" "$hash"
+    say "$pkg installed into $VENV ($(elapsed))"
+}
+# conveyor_twin_msgs, the twin's own messages.
+build_interfaces conveyor_twin_msgs msg_defs msg_defs
+# simulation_interfaces, the simulator-agnostic interface the twin also serves (the definitions
+# of the release Jazzy and Kilted ship; docs/platforms.md).
+build_interfaces simulation_interfaces interfaces/simulation_interfaces simulation_interfaces
 
 # 5. AMENT_PREFIX_PATH --------------------------------------------------------------------------
 # ros-wheels-bootstrapper.pth re-executes the interpreter with LD_LIBRARY_PATH; nothing sets
@@ -228,6 +241,26 @@ fi
 if [[ "$(readlink "$LINK" 2> /dev/null)" != ".venv-$DISTRO" ]]; then
     ln -sfn ".venv-$DISTRO" "$LINK"
     say ".venv now points at .venv-$DISTRO"
+fi
+
+# 8. numba kernels --------------------------------------------------------------------------------
+# Compiled into $VENV/var/cache/conveyor_twin/numba (conveyor_twin/numba_cache.py); again when the
+# package's sources, the cells or the environment changed, or the cache is gone.
+kernel_cache="$VENV/var/cache/conveyor_twin/numba"
+kernel_files=$(cd "$ROOT" && find conveyor_twin -name '*.py' -o -name '*.yaml' | LC_ALL=C sort)
+kernel_hash=$(printf '%s %s %s %s' "$(hash_files $kernel_files)" "$req_hash" "$VENV" \
+    "$py_version" | sha256sum | cut -d' ' -f1)
+# A kernel source edited and changed back drops the cache (numba_cache.py) with the same hash:
+# an empty cache is compiled again. (NUMBA_CACHE_DIR, when set, is where numba caches instead.)
+if stamp_ok kernels "$kernel_hash" && [[ -n "${NUMBA_CACHE_DIR:-}" \
+        || -n "$(find "$kernel_cache" -name '*.nbi' -print -quit 2> /dev/null)" ]]; then
+    say 'numba kernels up to date'
+else
+    say "compiling the numba kernels into $kernel_cache (about a minute the first time)"
+    "$VENV/bin/conveyor-twin" warm-up --quiet < /dev/null \
+        || die 'conveyor-twin warm-up failed (above): the simulation kernels do not compile'
+    stamp_write kernels "$kernel_hash"
+    say "numba kernels ready ($(elapsed))"
 fi
 
 say "ready in $(elapsed): ROS 2 $DISTRO, Python $py_version in .venv-$DISTRO (.venv):"`

@@ -23,6 +23,10 @@ VERBS = {
                 'render a recording as a GIF or MP4 (parts, density, barriers, belts)'),
     'resimulate': ('conveyor_twin.cli.resimulate',
                    're-run a recording and compare every message bit for bit'),
+    'plc-map': ('conveyor_twin.cli.plc_map',
+                "print a cell's PLC tags: OPC UA paths, Modbus addresses (CSV or Markdown)"),
+    'warm-up': ('conveyor_twin.cli.warm_up',
+                'compile or load the simulation kernels ahead (make setup runs it)'),
     'foxglove-layout': ('conveyor_twin.cli.foxglove_layout',
                         "write the Foxglove layout of a cell's (or a plant's) live view"),
 }

@@ -70,7 +70,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--quiet', action='store_true', help='no progress lines (on stderr)')
     p.add_argument('--foxglove', default='', metavar='[HOST:]PORT',
                    help='serve one live Foxglove view of every cell (docs/foxglove.md)')
+    p.add_argument('--discovery-server', default='', metavar='[start:][HOST:]PORT',
+                   help='discover the other processes only through the Fast DDS discovery '
+                   'server at [HOST:]PORT (HOST default 127.0.0.1), for cells on hosts '
+                   'without multicast; start[:[HOST:]PORT]: start one listening there '
+                   '(default 127.0.0.1:11811) for the run, and use it (not with --cell)')
+    from conveyor_twin.cli.run import add_plc_arguments
+    add_plc_arguments(p, plant=True)
     return p
+
+
+def _cell_plc(plant: Plant, args: argparse.Namespace, name: str):
+    """Return the PLC options of cell ``name`` (its ports: the base ports + its index in the
+    plant), or None without ``--opcua``/``--modbus``."""
+    from conveyor_twin.cli.run import plc_options
+    options = plc_options(args)
+    if options is None:
+        return None
+    return options.for_cell([c.name for c in plant.cells].index(name))
 
 
 def _init_ros():
@@ -96,9 +113,19 @@ def run_cell(plant: Plant, args: argparse.Namespace) -> int:
     run = args.run_id if args.run_id is not None else time.time_ns() & 0xFFFFFFFFFFFF
     context = _init_ros()
     stop = _interrupts()
-    node = PlantCellNode(plant, args.cell, context=context, mode=TimeMode(args.mode),
-                         end_step=end, run=run, streams=not args.no_streams,
-                         record=args.record)
+    from conveyor_twin.plc.address import PlcServerError
+    try:
+        node = PlantCellNode(plant, args.cell, context=context, mode=TimeMode(args.mode),
+                             end_step=end, run=run, streams=not args.no_streams,
+                             record=args.record, plc=_cell_plc(plant, args, args.cell))
+    except PlcServerError as exc:
+        print(f'conveyor-twin plant: cell {args.cell!r}: {exc}', file=sys.stderr, flush=True)
+        context.try_shutdown()
+        return 2
+    if node.composed is not None and node.composed.plc is not None:
+        for line in node.composed.plc.describe():
+            print(f'conveyor-twin plant: cell {args.cell!r}: {line}', file=sys.stderr,
+                  flush=True)
     node.start()
     try:
         last = 0.0
@@ -151,6 +178,16 @@ def _cell_command(args: argparse.Namespace, name: str) -> List[str]:
         cmd.append('--no-streams')
     if args.record:
         cmd += ['--record', args.record]
+    if getattr(args, 'discovery', None) is not None:
+        cmd += ['--discovery-server', args.discovery.describe()]
+    for flag, value in (('--opcua', args.opcua), ('--modbus', args.modbus),
+                        ('--opcua-security', args.opcua_security),
+                        ('--opcua-user', args.opcua_user),
+                        ('--opcua-cert-dir', args.opcua_cert_dir)):
+        if value:
+            cmd += [flag, value]
+    if args.plc_read_only:
+        cmd.append('--plc-read-only')
     return cmd
 
 
@@ -172,7 +209,9 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
     cells: Optional[CellProcesses] = None
     t0 = time.monotonic()
     finals: List[dict] = []
+    server = None
     try:
+        server = _start_discovery_server(args, health)  # None without --discovery-server start
         if args.monitor:
             pass
         elif args.composed:
@@ -223,6 +262,8 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
             composed.stop()
         if cells is not None:
             finals = cells.stop(FINISH_TIMEOUT)
+        if server is not None:
+            server.stop()
         executor.shutdown(timeout_sec=2.0)
         monitor.destroy()
         context.try_shutdown()
@@ -256,6 +297,24 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
         return EXIT_BACKGROUND_FAILURE
     complete = bool(end) and monitor.all_done()
     return 0 if complete or (not end and stop) else 1
+
+
+def _start_discovery_server(args: argparse.Namespace, health: Health):
+    """Start the discovery server of ``--discovery-server start...`` (its end before the run's
+    is reported to ``health``); None without it."""
+    setting = getattr(args, 'discovery', None)
+    if setting is None or not setting.start:
+        return None
+    from conveyor_twin.plant.discovery import DiscoveryError, DiscoveryServer
+    server = DiscoveryServer(setting.address, health=health)
+    try:
+        server.start()
+    except DiscoveryError as exc:  # before any cell starts
+        print(f'conveyor-twin plant: {exc}', file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
+    print(f'conveyor-twin plant: discovery server at {setting.address} (pid {server.pid})',
+          file=sys.stderr, flush=True)
+    return server
 
 
 def _start_foxglove(plant: Plant, args: argparse.Namespace, node, health: Health):
@@ -310,6 +369,33 @@ def main(argv: List[str]) -> int:
             print("conveyor-twin plant: --foxglove shows every cell's streams: not with --cell "
                   'or --no-streams', file=sys.stderr)
             return 2
+    if args.opcua is not None or args.modbus is not None:
+        if args.composed or args.monitor or args.no_streams:
+            print('conveyor-twin plant: --opcua/--modbus: each cell serves its own, with its '
+                  'streams, in its process: not with --composed, --monitor or --no-streams',
+                  file=sys.stderr)
+            return 2
+        try:
+            for index in range(len(plant.cells)):
+                _cell_plc(plant, args, plant.cells[index].name)
+        except ValueError as exc:
+            print(f'conveyor-twin plant: {exc}', file=sys.stderr)
+            return 2
+    args.discovery = None
+    if args.discovery_server:  # before anything creates a ROS context: Fast DDS reads it then
+        from conveyor_twin.plant.discovery import (client_environment, DiscoveryError,
+                                                   parse_discovery_server)
+        try:
+            args.discovery = parse_discovery_server(args.discovery_server)
+        except DiscoveryError as exc:
+            print(f'conveyor-twin plant: {exc}', file=sys.stderr)
+            return 2
+        if args.discovery.start and args.cell:
+            print('conveyor-twin plant: --discovery-server start: a cell process uses a server '
+                  '([HOST:]PORT); start one with the plant (--processes, --composed or '
+                  '--monitor)', file=sys.stderr)
+            return 2
+        os.environ.update(client_environment(args.discovery.address))
     if args.cell:
         if args.cell not in [c.name for c in plant.cells]:
             print(f'conveyor-twin plant: {args.plant}: no cell {args.cell!r} (cells: '

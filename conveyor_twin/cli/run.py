@@ -54,11 +54,54 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--scenario', default='', metavar='FILE',
                    help='fault scenario YAML: faults by step or time, or triggered by the '
                    "cell's state (docs/faults.md); checked before the twin starts")
+    add_plc_arguments(p)
     p.add_argument('--json', action='store_true', help='print the summary as one JSON object')
     p.add_argument('--quiet', action='store_true', help='no progress line')
     from conveyor_twin.cli.record import add_recording_arguments
     add_recording_arguments(p)
     return p
+
+
+def add_plc_arguments(p: argparse.ArgumentParser, *, plant: bool = False) -> None:
+    """Add the PLC servers' options (docs/plc.md); ``plant``: the ports are base ports (cell
+    i of the plant serves at BASE + i)."""
+    each = ('; cell i of the plant serves at PORT + i (port 0: each cell a free one)'
+            if plant else '')
+    p.add_argument('--opcua', default=None, metavar='[HOST:]PORT',
+                   help='serve OPC UA at HOST:PORT (host 127.0.0.1 by default, port 0 picks a '
+                   f'free one; the standard port is 4840){each}')
+    p.add_argument('--modbus', default=None, metavar='[HOST:]PORT',
+                   help='serve Modbus TCP at HOST:PORT (host 127.0.0.1 by default, port 0 '
+                   f'picks a free one; the standard port is 502){each}')
+    p.add_argument('--plc-read-only', action='store_true',
+                   help='the PLC servers refuse every write (setpoints, targets, stepping)')
+    p.add_argument('--opcua-security', default='Basic256Sha256',
+                   choices=['Basic256Sha256', 'None'],
+                   help='OPC UA security policy (default Basic256Sha256, sign and encrypt)')
+    p.add_argument('--opcua-user', default='', metavar='USER',
+                   help='OPC UA user name (password from the environment variable '
+                   'CONVEYOR_TWIN_OPCUA_PASSWORD); default: anonymous')
+    p.add_argument('--opcua-cert-dir', default='', metavar='DIR',
+                   help="folder of the OPC UA server's certificate and key (made on first "
+                   'start; default ~/.local/share/conveyor_twin/opcua)')
+
+
+def plc_options(args: argparse.Namespace):
+    """Return the :class:`~conveyor_twin.plc.options.PlcOptions` of the command line (None
+    without ``--opcua``/``--modbus``).
+
+    :raises ValueError: on an invalid address or combination (the message names it).
+    """
+    if args.opcua is None and args.modbus is None:
+        return None
+    from conveyor_twin.plc.address import parse_address
+    from conveyor_twin.plc.options import options_from_env
+    for flag, address in (('--opcua', args.opcua), ('--modbus', args.modbus)):
+        if address is not None:
+            parse_address(address, option=flag)
+    return options_from_env(args.opcua, args.modbus, read_only=args.plc_read_only,
+                            security=args.opcua_security, user=args.opcua_user,
+                            cert_dir=args.opcua_cert_dir)
 
 
 def _progress(summary: dict, wall: float) -> str:
@@ -119,16 +162,22 @@ def run_composed(args: argparse.Namespace) -> int:
     max_steps = round(args.duration / cell.settings.step) if args.duration > 0 else None
     context = Context()
     rclpy.init(context=context, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    from conveyor_twin.plc.address import PlcServerError
     from conveyor_twin.viz.foxglove_view import FoxgloveError
     try:
         twin = ComposedTwin(cell, seed=seed, mode=mode, context=context,
                             namespace=args.namespace, markers_rate=args.markers_rate,
                             max_steps=max_steps, foxglove=args.foxglove or '',
-                            foxglove_rate=args.foxglove_rate, scenario=scenario)
-    except FoxgloveError as exc:
+                            foxglove_rate=args.foxglove_rate, scenario=scenario,
+                            plc=plc_options(args))
+    except (FoxgloveError, PlcServerError) as exc:
         print(f'conveyor-twin run: {exc}; the twin was not started', file=sys.stderr)
         context.try_shutdown()
         return 2
+    if twin.plc is not None:
+        for line in twin.plc.describe():
+            print(f'conveyor_twin: {line}', file=sys.stderr if args.json else sys.stdout,
+                  flush=True)
     from conveyor_twin.record.errors import RecordingError
     from conveyor_twin.cli.record import recording_options
     from conveyor_twin.ros.run_recording import format_recording, start_recording
@@ -274,6 +323,16 @@ def main(argv: List[str]) -> int:
         except FoxgloveError as exc:
             print(f'conveyor-twin run: {exc}', file=sys.stderr)
             return 2
+    try:
+        plc = plc_options(args)
+    except ValueError as exc:
+        print(f'conveyor-twin run: {exc}', file=sys.stderr)
+        return 2
+    if plc is not None and args.split:
+        print('conveyor-twin run: --opcua and --modbus need the composed layout (no --split): '
+              'the split layout makes the light-barrier edges in the micro process and takes '
+              'commands in the coordinator process', file=sys.stderr)
+        return 2
     if args.split:
         return run_split(args)
     return run_composed(args)

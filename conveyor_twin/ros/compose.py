@@ -21,6 +21,8 @@ from conveyor_twin.faults.scenario import Scenario
 from conveyor_twin.health import Health
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.producers import CoordinatorOutput, MacroOutput, MicroOutput
+from conveyor_twin.plc.attach import attach_plc
+from conveyor_twin.plc.options import PlcOptions
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
 from conveyor_twin.ros.foxglove_bridge import attach
 from conveyor_twin.ros.compat import make_executor, spin_until
@@ -28,6 +30,7 @@ from conveyor_twin.ros.macro_node import MacroNode
 from conveyor_twin.ros.micro_node import MicroNode
 from conveyor_twin.ros.params import parameter_overrides
 from conveyor_twin.ros.qos import publish_failures
+from conveyor_twin.ros.sim_attach import attach_sim_interfaces
 from conveyor_twin.viz.foxglove_view import DEFAULT_STREAM_RATE, FoxgloveView
 
 
@@ -46,15 +49,19 @@ class ComposedTwin:
     :param foxglove: ``[HOST:]PORT`` of a live Foxglove view to serve; empty: none.
     :param foxglove_rate: rate of the per-step streams sent to Foxglove clients [Hz].
     :param scenario: a validated fault scenario to arm (re-armed after every reset).
+    :param plc: the OPC UA / Modbus TCP servers to serve (docs/plc.md); None: none.
     :raises conveyor_twin.viz.foxglove_view.FoxgloveError: if the Foxglove server cannot listen
         at ``foxglove`` (nothing is left running).
+    :raises conveyor_twin.plc.address.PlcServerError: if a PLC server cannot listen where
+        ``plc`` says (nothing is left running).
     """
 
     def __init__(self, cell: Cell, *, seed: int, mode: TimeMode, context: Context,
                  namespace: Optional[str] = None, markers_rate: float = 30.0,
                  max_steps: Optional[int] = None, foxglove: str = '',
                  foxglove_rate: float = DEFAULT_STREAM_RATE,
-                 scenario: Optional[Scenario] = None) -> None:
+                 scenario: Optional[Scenario] = None,
+                 plc: Optional[PlcOptions] = None) -> None:
         self.cell = cell
         self.context = context
         self._foreign_threads = thread_ids()  # those this twin does not start
@@ -92,6 +99,9 @@ class ComposedTwin:
         self.micro_node = MicroNode(self.micro_stage, **common)
         self.macro_node = MacroNode(self.macro_stage, **common)
         self.twin.step_listeners.append(self.output.on_step)
+        #: The ``simulation_interfaces`` server (docs/simulation_interfaces.md; None if that
+        #: package is not installed).
+        self.sim_interfaces = attach_sim_interfaces(self, namespace)
         if mode is TimeMode.REALTIME:
             self.micro_node.markers_priority = realtime_priority(helper=True)
         self.executor = make_executor(context)
@@ -102,9 +112,15 @@ class ComposedTwin:
         self._final_diagnostics = False  # the ERROR diagnostics after a failure was published
         #: The live Foxglove view (None without ``foxglove``).
         self.foxglove: Optional[FoxgloveView] = None
-        if foxglove:
+        #: The PLC servers (:class:`~conveyor_twin.plc.attach.PlcServers`; None without ``plc``).
+        self.plc = None
+        if foxglove or (plc is not None and plc.any):
             try:
-                self.foxglove = attach(self, foxglove, stream_rate=foxglove_rate)
+                if foxglove:
+                    self.foxglove = attach(self, foxglove, stream_rate=foxglove_rate)
+                if plc is not None and plc.any:
+                    self.plc = attach_plc(self, plc)
+                    self.coordinator.add_counters(self.plc.counters)
             except BaseException:
                 self.stop()
                 raise
@@ -134,6 +150,8 @@ class ComposedTwin:
         self._spin_thread = threading.Thread(target=self.health.guard(EXECUTOR, self._spin),
                                              name='conveyor_twin_executor', daemon=True)
         self._spin_thread.start()
+        if self.sim_interfaces is not None:
+            self.sim_interfaces.start()
         self.runner.start()
 
     def stop(self) -> None:
@@ -149,6 +167,8 @@ class ComposedTwin:
                 self.coordinator.publish_diagnostics()
             except Exception as exc:  # noqa: BLE001 - e.g. the context already shut down
                 self.health.report('final diagnostics', exc)
+        if self.sim_interfaces is not None:
+            self.sim_interfaces.stop()
         self._stop_spin.set()
         if self._spin_thread is not None:
             self._spin_thread.join(5.0)
@@ -157,3 +177,5 @@ class ComposedTwin:
             node.destroy_node()
         if self.foxglove is not None:
             self.foxglove.stop()
+        if self.plc is not None:
+            self.plc.stop()

@@ -98,6 +98,8 @@ class PlantCellNode:
     :param run: id of this run of the cell (give a restarted cell another).
     :param streams: serve the cell's own interface (parts, barriers, commands, ...).
     :param record: folder to record the cell's streams to (``<cell>.mcap``; with streams).
+    :param plc: the cell's PLC servers (:class:`~conveyor_twin.plc.options.PlcOptions`, the
+        ports of this cell; with streams); the plant steps the cell, so a PLC cannot.
 
     A failure of the stepping thread, the executor or a link's callback is reported once to
     :attr:`health` (with streams the cell twin's: its diagnostics say ERROR), sets
@@ -106,7 +108,7 @@ class PlantCellNode:
 
     def __init__(self, plant: Plant, name: str, *, context: Context, mode: TimeMode,
                  end_step: int = 0, run: int = 0, streams: bool = True,
-                 record: str = '') -> None:
+                 record: str = '', plc: Optional[Any] = None) -> None:
         self.plant = plant
         self.mode = TimeMode(mode)
         self.end_step = int(end_step)
@@ -118,6 +120,11 @@ class PlantCellNode:
             self.composed = ComposedTwin(spec.cell, seed=spec.seed, mode=TimeMode.LOCKSTEP,
                                          context=context, namespace='/' + spec.namespace)
             self.composed.runner.step = self._refuse_step
+            if self.composed.sim_interfaces is not None:  # queries only: the plant steps it
+                self.composed.sim_interfaces.refuse_control(
+                    'the plant steps, resets and fills this cell')
+            if plc is not None and plc.any:
+                self._attach_plc(plc)
             twin = self.composed.assembled
             self.executor = self.composed.executor
         else:
@@ -180,6 +187,17 @@ class PlantCellNode:
         self._threads: List[threading.Thread] = []
         #: Publishes the middleware refused at first (and that were retried).
         self.publish_retries = 0
+
+    def _attach_plc(self, plc: Any) -> None:
+        """Serve the cell's OPC UA / Modbus TCP servers (stepped by the plant, not a PLC)."""
+        from conveyor_twin.plc.attach import attach_plc
+        try:
+            self.composed.plc = attach_plc(self.composed, plc, steppable=False,
+                                           mode=self.mode.value)
+        except BaseException:
+            self.composed.stop()
+            raise
+        self.composed.coordinator.add_counters(self.composed.plc.counters)
 
     def _refuse_step(self, n: int = 1) -> None:
         self.node.get_logger().warning('step service ignored: the plant steps this cell')

@@ -68,7 +68,8 @@ class RunningLayout:
 
 def start_layout(cell: Cell, cell_file: Optional[str], *, seed: int, layout: Layout,
                  context: Context, domain_id: int, log_dir: Path, foxglove: str = '',
-                 scenario: Optional[object] = None) -> RunningLayout:
+                 scenario: Optional[object] = None, plc: Optional[object] = None
+                 ) -> RunningLayout:
     """Build and start a lockstep twin of ``cell``.
 
     :param cell: the validated cell
@@ -81,6 +82,8 @@ def start_layout(cell: Cell, cell_file: Optional[str], *, seed: int, layout: Lay
     :param log_dir: where the split processes write their output (``<module>.log``)
     :param foxglove: ``[HOST:]PORT`` of a live Foxglove view; empty: none
     :param scenario: a validated fault scenario to arm, or None
+    :param plc: the PLC servers' :class:`~conveyor_twin.plc.options.PlcOptions` (composed
+        layout only), or None
     :return: the running twin
     :raises ValueError: on an unknown layout, or a split layout of a cell without a file
     """
@@ -88,7 +91,7 @@ def start_layout(cell: Cell, cell_file: Optional[str], *, seed: int, layout: Lay
         from conveyor_twin.ros.compose import ComposedTwin
 
         twin = ComposedTwin(cell, seed=seed, mode=TimeMode.LOCKSTEP, context=context,
-                            markers_rate=0.0, foxglove=foxglove, scenario=scenario)
+                            markers_rate=0.0, foxglove=foxglove, scenario=scenario, plc=plc)
         twin.start()
         return RunningLayout(composed=twin)
     if layout != Layout.SPLIT:

@@ -20,6 +20,7 @@ from typing import Any, Optional, Union
 from conveyor_twin.cell import load_cell
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.layout import Layout
+from conveyor_twin.plc.options import PlcOptions
 from conveyor_twin.testing import checks
 from conveyor_twin.testing._layout import LAYOUTS
 from conveyor_twin.testing.acting import Acting
@@ -54,11 +55,18 @@ class LockstepTwin(Stepping, Acting, Controllers):
         :attr:`foxglove`; split: the coordinator process serves it, give a port.
     :param scenario: a fault scenario file to arm (``docs/faults.md``); checked before the
         twin starts
+    :param opcua: ``[HOST:]PORT`` of an OPC UA server of the twin (``docs/plc.md``; composed
+        layout; port 0 picks a free one, see :attr:`plc`); None: none
+    :param modbus: ``[HOST:]PORT`` of a Modbus TCP server of the twin, likewise
+    :param plc: the PLC servers' other options (read-only, OPC UA security, user, certificate
+        folder: :class:`~conveyor_twin.plc.options.PlcOptions`; its addresses are replaced by
+        ``opcua`` and ``modbus``); None: the defaults
     :raises ValueError: on an unknown layout, a seed, chunk or timeout out of range (the
         message names it, the value and the range), an invalid ``foxglove`` address, or port 0
         with the split layout
     :raises conveyor_twin.faults.scenario.ScenarioError: on an invalid scenario file
     :raises conveyor_twin.viz.foxglove_view.FoxgloveError: if the view cannot listen there
+    :raises conveyor_twin.plc.address.PlcServerError: if a PLC server cannot listen there
     :raises conveyor_twin.cell.CellError: on an invalid cell file
 
     The twin leaves no trace: the process's environment is not changed (the domain id and
@@ -70,7 +78,8 @@ class LockstepTwin(Stepping, Acting, Controllers):
     def __init__(self, cell: Union[None, str, Path, Cell] = None, *, seed: int = DEFAULT_SEED,
                  layout: Layout = 'composed', chunk: int = DEFAULT_CHUNK,
                  timeout: float = TIMEOUT, foxglove: Optional[str] = None,
-                 scenario: Union[None, str, Path] = None) -> None:
+                 scenario: Union[None, str, Path] = None, opcua: Optional[str] = None,
+                 modbus: Optional[str] = None, plc: Optional[PlcOptions] = None) -> None:
         seed = checks.integer('seed', seed, 0, checks.UINT64_MAX)
         chunk = checks.integer('chunk', chunk, 1, checks.UINT32_MAX)
         timeout = checks.seconds('timeout', timeout, open_low=True)
@@ -85,6 +94,7 @@ class LockstepTwin(Stepping, Acting, Controllers):
             if port == 0 and layout == 'split':
                 raise ValueError('foxglove: the split layout serves the view from its own '
                                  'process; give a port other than 0')
+        plc_options = _plc_options(opcua, modbus, plc, layout)
         cell_file = None if cell is None or isinstance(cell, Cell) else os.fspath(cell)
         self.cell: Cell = cell if isinstance(cell, Cell) else load_cell(cell_file)
         self.scenario = None
@@ -98,10 +108,31 @@ class LockstepTwin(Stepping, Acting, Controllers):
         self.step_index = 0
         #: Simulation time of the last step, as the ``step`` service answered it [ns].
         self.time_ns = 0
-        self._start(cell_file, timeout=timeout, foxglove=foxglove or '')
+        self._start(cell_file, timeout=timeout, foxglove=foxglove or '', plc=plc_options)
 
     def __enter__(self) -> 'LockstepTwin':
         return self
 
     def __exit__(self, *exc_info: Any) -> None:
         self.close()
+
+
+def _plc_options(opcua: Optional[str], modbus: Optional[str], plc: Optional[PlcOptions],
+                 layout: Layout) -> Optional[PlcOptions]:
+    """Return the PLC servers' options of a lockstep twin (None: no server).
+
+    :raises ValueError: on an address that is no ``[HOST:]PORT`` or a server of the split
+        layout (the message names it).
+    """
+    if opcua is None and modbus is None:
+        return None
+    if layout == Layout.SPLIT:
+        raise ValueError('opcua/modbus: the PLC servers need the composed layout (the split '
+                         'layout makes the edges in another process)')
+    from dataclasses import replace
+
+    from conveyor_twin.plc.address import parse_address
+    for name, address in (('opcua', opcua), ('modbus', modbus)):
+        if address is not None:
+            parse_address(address, option=name)
+    return replace(plc or PlcOptions(), opcua=opcua or '', modbus=modbus or '')

@@ -48,7 +48,8 @@ class TwinLifecycle:
     domain_id: int
     context: Optional[Context]
 
-    def _start(self, cell_file: Optional[str], *, timeout: float, foxglove: str) -> None:
+    def _start(self, cell_file: Optional[str], *, timeout: float, foxglove: str,
+               plc: Any = None) -> None:
         """Lease a domain, start the twin of :attr:`cell` and connect the driver to it; on any
         failure, close what was started and raise."""
         self._closed = False
@@ -72,7 +73,7 @@ class TwinLifecycle:
             self._running = start_layout(self.cell, cell_file, seed=self.seed,
                                          layout=self.layout, context=self.context,
                                          domain_id=self.domain_id, log_dir=self._log_dir,
-                                         foxglove=foxglove, scenario=self.scenario)
+                                         foxglove=foxglove, scenario=self.scenario, plc=plc)
             self._supervisor = Supervisor(self._running, self._log_dir, self._processes)
             self._driver = Driver(self.context, density_per_step=density_per_step(self.cell),
                                   name='conveyor_twin_test', timeout=timeout)
@@ -178,6 +179,14 @@ class TwinLifecycle:
         started with ``foxglove=`` (its ``port`` is where it listens), else None."""
         composed = self.composed
         return composed.foxglove if composed is not None else None
+
+    @property
+    def plc(self) -> Any:
+        """The PLC servers of a composed twin started with ``opcua=``/``modbus=``
+        (:class:`~conveyor_twin.plc.attach.PlcServers`: ``opcua_url``, ``modbus_port``), else
+        None."""
+        composed = self.composed
+        return composed.plc if composed is not None else None
 
     @property
     def composed(self) -> Any:
