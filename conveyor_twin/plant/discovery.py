@@ -19,7 +19,6 @@ import functools
 import os
 import re
 import shutil
-import signal
 import subprocess
 import sys
 import threading
@@ -27,7 +26,7 @@ import time
 from typing import Deque, Dict, List, Optional, Sequence
 
 from conveyor_twin.health import Health
-from conveyor_twin.plant.supervisor import describe_status
+from conveyor_twin.plant.supervisor import describe_status, end_process
 
 #: The port Fast DDS' discovery server listens on unless told otherwise.
 DEFAULT_PORT = 11811
@@ -263,20 +262,7 @@ class DiscoveryServer:
 
         :return: its exit status (None if it was never started).
         """
-        p = self.popen
-        if p is None:
+        if self.popen is None:
             return None
         self._stopping = True
-        if p.poll() is None:
-            p.send_signal(signal.SIGINT)
-        try:
-            p.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            try:
-                os.killpg(p.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-            p.wait()
-        if self._reader is not None:
-            self._reader.join(5.0)
-        return p.returncode
+        return end_process(self.popen, self._reader, timeout)

@@ -38,6 +38,25 @@ def describe_status(code: int) -> str:
     return str(code)
 
 
+def end_process(p: subprocess.Popen, reader: Optional[threading.Thread],
+                timeout: float) -> int:
+    """Ask a child started in a process group of its own to end (SIGINT), kill the group after
+    ``timeout`` [s], wait for its output ``reader`` thread; return the exit status."""
+    if p.poll() is None:
+        p.send_signal(signal.SIGINT)
+    try:
+        p.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        try:
+            os.killpg(p.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        p.wait()
+    if reader is not None:
+        reader.join(5.0)
+    return p.returncode
+
+
 class CellProcess:
     """One cell's process and what it wrote.
 
@@ -100,22 +119,9 @@ class CellProcess:
     def stop(self, timeout: float) -> Optional[int]:
         """Ask the run to end (SIGINT), kill its process group after ``timeout`` [s]; return
         its exit status."""
-        p = self.popen
-        if p is None:
+        if self.popen is None:
             return None
-        if p.poll() is None:
-            p.send_signal(signal.SIGINT)
-        try:
-            p.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            try:
-                os.killpg(p.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-            p.wait()
-        if self._reader is not None:
-            self._reader.join(5.0)
-        return p.returncode
+        return end_process(self.popen, self._reader, timeout)
 
 
 class CellProcesses:
