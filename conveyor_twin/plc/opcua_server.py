@@ -45,7 +45,7 @@ __all__ = ['OpcUaSecurity', 'OpcUaServer', 'HEALTH_NAME', 'STATUS_OF_REASON']
 #: What a failure of the server thread is reported as.
 HEALTH_NAME = 'OPC UA server'
 #: Default period of the variables' updates [s].
-UPDATE_PERIOD = 0.005
+UPDATE_PERIOD = 0.02
 #: How long :meth:`OpcUaServer.start` waits for the server to listen [s] (a generous bound:
 #: loading asyncua's address space takes about a second on an idle machine).
 START_TIMEOUT = 120.0

@@ -11,6 +11,7 @@ that dies is a background failure of the twin.
 import math
 from pathlib import Path
 import socket
+import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import pytest
@@ -28,6 +29,26 @@ SEED = 5
 SPAWN_X = (1.80, 1.85, 1.90, 1.70, 1.75)
 SPAWN_Y = (-0.15, 0.0, 0.15, 0.08, -0.08)
 PLC = PlcOptions(security='None')
+#: Bound on how long an OPC UA variable may take to show a step [s] (the server updates its
+#: variables every 20 ms; generous for a loaded machine).
+SHOW_TIMEOUT = 30.0
+
+
+def _until(read, ok, what: str):
+    """Return ``read()`` once ``ok`` holds for it; fail after :data:`SHOW_TIMEOUT`."""
+    deadline = time.monotonic() + SHOW_TIMEOUT
+    while True:
+        value = read()
+        if ok(value):
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f'{what}: still {value!r} after {SHOW_TIMEOUT} s')
+        time.sleep(0.005)
+
+
+def _at_step(opcua, step: int) -> None:
+    """Wait until the OPC UA variables show ``step`` (one update writes them all)."""
+    _until(lambda: opcua.read(['Step'])[0], lambda v: v == step, 'OPC UA Step')
 
 
 def _spawn(twin: LockstepTwin) -> None:
@@ -53,11 +74,13 @@ def test_edges_through_opcua_and_modbus_equal_the_ros_edges(served):
     start = twin.step_index
     before = {n: (sum(e.blocked for e in twin.edges(name=n)),
                   sum(not e.blocked for e in twin.edges(name=n))) for n in names}
+    _at_step(opcua, twin.step_index)
     first_opcua = _opcua_counts(opcua, names)
     first_modbus = _modbus_counts(modbus, names)
     _spawn(twin)
     for _ in range(150):  # 1.5 s, polled every 10 ms of simulation time
         twin.step(10)
+        _at_step(opcua, twin.step_index)
         opcua_counts = _opcua_counts(opcua, names)
         modbus_counts = _modbus_counts(modbus, names)
     ros = {n: (sum(e.blocked for e in twin.edges(name=n, since_step=start + 1)),
@@ -99,7 +122,8 @@ def test_a_written_setpoint_shows_in_belt_states(served):
     opcua.write_double('Belts/main/SpeedSetpoint', 1.25)
     twin.step(2)
     assert twin.belt('main').commanded_speed == 1.25
-    assert opcua.read(['Belts/main/SpeedSetpoint'])[0] == 1.25
+    _until(lambda: opcua.read(['Belts/main/SpeedSetpoint'])[0], lambda v: v == 1.25,
+           'OPC UA SpeedSetpoint')
     reply = modbus.write(modbus.tags.by_path('Belts/main/SpeedSetpoint'), 0.75)
     assert not reply.isError(), reply
     twin.step(2)
@@ -125,7 +149,7 @@ def test_a_bad_write_is_refused_counted_and_applied_nowhere(served):
     twin.step(5)
     assert _rejected(twin) == rejected + 3
     assert {s.commanded for s in twin.belt_history('main')[-5:]} == {0.5}
-    assert opcua.read(['RejectedWrites'])[0] >= 3
+    _until(lambda: opcua.read(['RejectedWrites'])[0], lambda v: v >= 3, 'OPC UA RejectedWrites')
 
 
 def _rejected(twin) -> int:
@@ -148,7 +172,7 @@ def test_a_stalled_or_vanished_client_never_stalls_the_twin(served):
     start = twin.step_index
     assert twin.step(500) == start + 500
     assert modbus.inputs()['Step'] == start + 500
-    assert opcua.read(['Step'])[0] == start + 500
+    _at_step(opcua, start + 500)
     for s in stalled:
         s.close()
 
