@@ -6,7 +6,7 @@ belts, actuators and light barriers are entities named ``belt_<name>``, ``actuat
 no pose of their own). Poses are in the cell's frame (``settings.frame_id``), 2D: x, y and yaw
 about z, with z = 0 on the belt surface.
 
-:func:`list_entities` lists them from a snapshot of the parts (:class:`PartsSnapshot`),
+:func:`list_entities` lists them from a snapshot of the parts (:func:`snapshot_parts`),
 :class:`EntityQuery` filters them (a regular expression on the name, categories, tags, an
 overlap with a circle or a box), :func:`entity_state` gives an entity's pose and velocity and
 :func:`delete_part` takes a part out of the micro scale as if it had left through a sink.
@@ -21,6 +21,7 @@ import numpy as np
 
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.stages import MicroStage
+from conveyor_twin.micro.state import PartsView
 
 PART = 'part'
 BELT = 'belt'
@@ -79,28 +80,15 @@ class Pose2D:
     wz: float = 0.0
 
 
-@dataclass(frozen=True)
-class PartsSnapshot:
-    """Copies of the micro parts at one step: id, type index, x, y, yaw, vx, vy, wz (SI)."""
+def snapshot_parts(stage: MicroStage) -> PartsView:
+    """Copy the parts of ``stage`` now (call with the twin's lock held)."""
+    return PartsView(*(np.array(a, copy=True) for a in stage.parts()))
 
-    id: np.ndarray
-    part_type: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    yaw: np.ndarray
-    vx: np.ndarray
-    vy: np.ndarray
-    wz: np.ndarray
 
-    @classmethod
-    def of(cls, stage: MicroStage) -> 'PartsSnapshot':
-        """Copy the parts of ``stage`` now (call with the twin's lock held)."""
-        return cls(*(np.array(a, copy=True) for a in stage.parts()))
-
-    def row(self, part_id: int) -> Optional[int]:
-        """Return the row of part ``part_id``, or None if the micro scale does not hold it."""
-        hits = np.flatnonzero(self.id == part_id)
-        return int(hits[0]) if hits.size else None
+def part_row(parts: PartsView, part_id: int) -> Optional[int]:
+    """Return the row of part ``part_id`` in ``parts``, or None if it is not there."""
+    hits = np.flatnonzero(parts.id == part_id)
+    return int(hits[0]) if hits.size else None
 
 
 def part_name(part_id: int) -> str:
@@ -127,7 +115,7 @@ def static_entities(cell: Cell) -> List[Entity]:
     return out
 
 
-def part_entities(cell: Cell, parts: PartsSnapshot) -> List[Entity]:
+def part_entities(cell: Cell, parts: PartsView) -> List[Entity]:
     """Return the micro parts as entities, ids ascending."""
     names = [p.name for p in cell.part_types]
     return [Entity(part_name(i), PART, int(i), DYNAMIC, (PART, names[t]),
@@ -135,17 +123,17 @@ def part_entities(cell: Cell, parts: PartsSnapshot) -> List[Entity]:
             for i, t in zip(parts.id.tolist(), parts.part_type.tolist())]
 
 
-def list_entities(cell: Cell, parts: PartsSnapshot) -> List[Entity]:
+def list_entities(cell: Cell, parts: PartsView) -> List[Entity]:
     """Return every entity: the parts (ids ascending), then the belts, actuators and light
     barriers."""
     return part_entities(cell, parts) + static_entities(cell)
 
 
-def find_entity(cell: Cell, parts: PartsSnapshot, name: str) -> Optional[Entity]:
+def find_entity(cell: Cell, parts: PartsView, name: str) -> Optional[Entity]:
     """Return the entity called ``name``, or None."""
     part_id = part_id_of(name)
     if part_id is not None:
-        row = parts.row(part_id)
+        row = part_row(parts, part_id)
         if row is None:
             return None
         t = int(parts.part_type[row])
@@ -155,7 +143,7 @@ def find_entity(cell: Cell, parts: PartsSnapshot, name: str) -> Optional[Entity]
     return next((e for e in static_entities(cell) if e.name == name), None)
 
 
-def entity_state(cell: Cell, entity: Entity, parts: PartsSnapshot,
+def entity_state(cell: Cell, entity: Entity, parts: PartsView,
                  actuator_position: np.ndarray) -> Pose2D:
     """Return the pose and velocity of ``entity`` (a part: as the micro scale holds it; a belt:
     the centre of its surface, yaw along its running direction; a light barrier: the middle of
@@ -166,7 +154,7 @@ def entity_state(cell: Cell, entity: Entity, parts: PartsSnapshot,
     :raises KeyError: if a part is not held by the micro scale.
     """
     if entity.kind == PART:
-        row = parts.row(entity.index)
+        row = part_row(parts, entity.index)
         if row is None:
             raise KeyError(f'no part {entity.index} in the micro scale')
         return Pose2D(float(parts.x[row]), float(parts.y[row]), 0.0, float(parts.yaw[row]),
@@ -226,7 +214,7 @@ class EntityQuery:
     circle: Optional[Tuple[float, float, float]] = None
     box: Optional[Tuple[float, float, float, float]] = None
 
-    def select(self, cell: Cell, entities: Iterable[Entity], parts: PartsSnapshot,
+    def select(self, cell: Cell, entities: Iterable[Entity], parts: PartsView,
                actuator_position: np.ndarray) -> List[Entity]:
         """Return the entities that pass every filter, in their order.
 
@@ -255,7 +243,7 @@ class EntityQuery:
         have = [t in tags for t in self.tags]
         return all(have) if self.all_tags else any(have)
 
-    def _overlaps(self, cell: Cell, e: Entity, parts: PartsSnapshot,
+    def _overlaps(self, cell: Cell, e: Entity, parts: PartsView,
                   actuator_position: np.ndarray) -> bool:
         pose = entity_state(cell, e, parts, actuator_position)
         r = footprint_radius(cell, e)

@@ -2,7 +2,7 @@
 
 from typing import Any, Optional
 
-from conveyor_twin.coord.entities import delete_part, PartsSnapshot
+from conveyor_twin.coord.entities import delete_part, snapshot_parts
 
 
 def _server_class(coordinator: Any) -> Any:
@@ -24,7 +24,7 @@ def attach_sim_interfaces(composed: Any, namespace: Optional[str] = None) -> Any
     if server is None:
         return None
     micro = composed.micro_stage
-    return server(composed.coordinator, parts=lambda: PartsSnapshot.of(micro),
+    return server(composed.coordinator, parts=lambda: snapshot_parts(micro),
                   delete=lambda part_id: delete_part(micro, part_id),
                   context=composed.context, namespace=namespace)
 

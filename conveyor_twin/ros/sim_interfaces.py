@@ -33,7 +33,8 @@ from simulation_interfaces.srv import (DeleteEntity, GetEntities, GetEntitiesSta
                                        SetSimulationState, SpawnEntity, StepSimulation)
 
 from conveyor_twin.coord import entities
-from conveyor_twin.coord.entities import EntityQueryError, PartsSnapshot
+from conveyor_twin.coord.entities import EntityQueryError
+from conveyor_twin.micro.state import PartsView
 from conveyor_twin.coord.requests import check_spawn, RequestRejected
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.ros.compat import spin_until
@@ -74,7 +75,7 @@ class SimulationInterfaces:
     :param context: the twin's rclpy context. :param namespace: the twin's namespace.
     """
 
-    def __init__(self, coordinator, *, parts: Optional[Callable[[], PartsSnapshot]],
+    def __init__(self, coordinator, *, parts: Optional[Callable[[], PartsView]],
                  delete: Optional[Callable[[int], None]], context,
                  namespace: Optional[str] = None) -> None:
         self.coordinator = coordinator

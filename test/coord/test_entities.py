@@ -11,8 +11,9 @@ from conveyor_twin.cell import load_cell
 from conveyor_twin.cell.loader import cell_from_mapping, default_cell_text
 from conveyor_twin.coord import entities
 from conveyor_twin.coord.assembly import build_twin
+from conveyor_twin.micro.state import PartsView
 from conveyor_twin.coord.entities import (delete_part, EntityQuery, EntityQueryError,
-                                          PartsSnapshot)
+                                          snapshot_parts)
 
 
 def twin_with_parts(seed: int = 3, steps: int = 800):
@@ -21,8 +22,8 @@ def twin_with_parts(seed: int = 3, steps: int = 800):
     return built
 
 
-def snapshot(built) -> PartsSnapshot:
-    return PartsSnapshot.of(built.micro)
+def snapshot(built) -> PartsView:
+    return snapshot_parts(built.micro)
 
 
 def test_part_names_round_trip_and_reject_other_names() -> None:
