@@ -7,10 +7,12 @@ same commands). Drives: ``belt_stall`` holds the drive at 0 (it ramps up again f
 cleared), ``actuator_stuck``/``actuator_slow`` scale the actuator's rate limit; ``belt_slip``,
 ``belt_speed_noise`` and ``actuator_offset`` change what the stages get (and what
 ``belt_states``/``actuator_states`` report as actual) without touching the drive's state.
+An offset actuator moves to (and, once cleared, back from) its offset at its own speed (times
+any ``actuator_slow`` factor), so what is reported is where every scale's actuator is.
 """
 
 import dataclasses
-from typing import Any, Dict, List, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -18,6 +20,7 @@ from conveyor_twin.cell.model import Cell
 from conveyor_twin.contract import ACTUATOR_COMMAND, BELT_COMMAND
 from conveyor_twin.faults.book import CLEAR, fault_rng, FaultEvent, steps_of
 from conveyor_twin.faults.model import ActiveFault
+from conveyor_twin.micro.drive import ramp
 
 # the coordinator's command kinds (``Command.kind``)
 BELT = 'belt'
@@ -47,16 +50,25 @@ class ActuationFaults:
         self._low = np.array([a.position_range[0] for a in cell.actuators], dtype=np.float64)
         self._high = np.array([a.position_range[1] for a in cell.actuators], dtype=np.float64)
         self._rate = np.ones(len(cell.actuators))
+        self._nominal_dx = np.array([a.max_speed * self.dt for a in cell.actuators],
+                                    dtype=np.float64)
+        self._dx = self._nominal_dx.copy()  # every actuator's move per step now [m or rad]
+        # where the actuators are while an offset acts or fades (None: where they are driven)
+        self._offset_position: Optional[np.ndarray] = None
+        self._goal = np.zeros(len(cell.actuators))
+        self._offsets = False  # an actuator_offset fault is active
         self.dropped = 0   # commands lost to faults
         self.delayed = 0   # commands delayed by faults
 
     @property
     def busy(self) -> bool:
-        """True while a fault is active or a delayed command is waiting."""
-        return bool(self.faults or self._delayed)
+        """True while a fault is active, a delayed command is waiting or an actuator is
+        still moving back from a cleared offset."""
+        return bool(self.faults or self._delayed) or self._offset_position is not None
 
     def apply(self, events: Sequence[FaultEvent], actuation: Actuation) -> None:
-        """Take the step's events (those of other stages are ignored)."""
+        """Take the step's events (those of other stages are ignored); called before
+        :meth:`Actuation.advance`."""
         for event in events:
             fault = event.fault
             if fault.kind not in _COMMAND_FAULTS and fault.kind not in _DRIVE_FAULTS:
@@ -75,6 +87,11 @@ class ActuationFaults:
                 elif fault.kind == 'actuator_slow':
                     self._rate[fault.index] *= fault.param('factor')
             actuation.set_actuator_rate_factors(self._rate)
+            np.multiply(self._nominal_dx, self._rate, out=self._dx)
+            self._offsets = any(f.kind == 'actuator_offset' for f in self.faults.values())
+            if self._offsets and self._offset_position is None:
+                # the actuators are where they were driven at the end of the last step
+                self._offset_position = actuation.actuator_position.copy()
 
     def filter_commands(self, commands: List[Command], step: int) -> List[Command]:
         """Return the commands that take effect at ``step``: the drained ones that no fault
@@ -113,7 +130,8 @@ class ActuationFaults:
 
     def drive(self, actuation: Actuation) -> Tuple[np.ndarray, np.ndarray]:
         """Return the belt speeds [m/s] and actuator positions the stages get this step (after
-        :meth:`Actuation.advance`); a stalled belt's drive is held at 0."""
+        :meth:`Actuation.advance`); a stalled belt's drive is held at 0, an offset actuator
+        moves toward where it is driven plus its offset (clipped to its range) at its speed."""
         belt = actuation.belt_speed.copy()
         position = actuation.actuator_position.copy()
         for fault in self.faults.values():
@@ -127,17 +145,34 @@ class ActuationFaults:
                 belt[fault.index] *= fault.param('factor')
             elif kind == 'belt_speed_noise':
                 belt[fault.index] += fault.param('sigma') * self._rng[fault.id].standard_normal()
-            elif kind == 'actuator_offset':
-                i = fault.index
-                position[i] = min(max(position[i] + fault.param('offset'), self._low[i]),
-                                  self._high[i])
+        if self._offset_position is not None:
+            position = self._offset(position)
         return belt, position
+
+    def _offset(self, driven: np.ndarray) -> np.ndarray:
+        """Move the offset positions one step toward ``driven`` plus the active offsets;
+        return them (a copy), forgetting them once no offset is active and they are back on
+        ``driven``."""
+        goal = self._goal
+        goal[:] = driven
+        for fault in self.faults.values():
+            if fault.kind == 'actuator_offset':
+                i = fault.index
+                goal[i] = min(max(driven[i] + fault.param('offset'), self._low[i]),
+                              self._high[i])
+        moved = self._offset_position
+        ramp(moved, goal, self._dx)
+        if not self._offsets and np.array_equal(moved, driven):
+            self._offset_position = None
+        return moved.copy()
 
     def reset(self) -> None:
         """Forget every fault and delayed command (counters are kept)."""
         self.faults.clear()
         self._rng.clear()
         self._delayed.clear()
+        self._offset_position = None
+        self._offsets = False
 
 
 def _at(command: Command, step: int) -> Command:

@@ -82,7 +82,7 @@ KINDS: Dict[str, Kind] = {
                           'the actuator moves at `factor` x its max speed'),
     'actuator_offset': Kind(ACTUATOR, {'offset': Param('m or rad', -1e3, 1e3)},
                             'the actuator sits `offset` from where it is driven (clipped to '
-                            'its range)'),
+                            'its range), moving there at its speed'),
     'actuator_ignore_commands': Kind(ACTUATOR, {}, 'commands to the actuator have no effect'),
     'actuator_delay_commands': Kind(ACTUATOR, {'delay': _DELAY},
                                     'commands to the actuator take effect `delay` late'),

@@ -25,6 +25,7 @@ from conveyor_twin.coord.layout import Layout
 from conveyor_twin.testing._layout import density_per_step, RunningLayout, start_layout
 from conveyor_twin.testing.driver import Driver
 from conveyor_twin.testing.errors import ConditionNotMet, TwinClosedError, TwinTimeoutError
+from conveyor_twin.testing.kernels import ready_kernels
 from conveyor_twin.testing.processes import RosProcesses
 from conveyor_twin.testing.ros_env import DomainLease, lease_domain_id, loopback_environment
 from conveyor_twin.testing.supervision import keep_dir_note, Supervisor
@@ -50,8 +51,12 @@ class TwinLifecycle:
 
     def _start(self, cell_file: Optional[str], *, timeout: float, foxglove: str,
                plc: Any = None) -> None:
-        """Lease a domain, start the twin of :attr:`cell` and connect the driver to it; on any
-        failure, close what was started and raise."""
+        """Have the kernels ready, lease a domain, start the twin of :attr:`cell` and connect
+        the driver to it; on any failure, close what was started and raise.
+
+        The kernels are compiled (or loaded) first with their own budget
+        (:func:`~conveyor_twin.testing.kernels.ready_kernels`), so ``timeout`` never covers a
+        compile."""
         self._closed = False
         self._failed = False
         self._raised = 0  # background failures already raised to the test
@@ -65,6 +70,8 @@ class TwinLifecycle:
         self._supervisor: Optional[Supervisor] = None
         self.context = None
         try:
+            with self._failing():
+                ready_kernels(self.cell, self.seed, timeout=timeout)
             context = Context()
             with loopback_environment():
                 rclpy.init(context=context, domain_id=self.domain_id,
