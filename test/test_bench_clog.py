@@ -1,42 +1,93 @@
-"""``bench clog``: the narrowed gap, the release, the overlap measure, and a tiny run of both
-engines whose figures must be in range (not its wall-clock times)."""
+"""``bench clog``: both scenes' gaps measured from their geometry, the releases, the overlap
+measure, the Wilson interval and the verdict, the reference file and its refusals, and a tiny
+run of both engines whose figures must be in range (not its wall-clock times)."""
 
 import json
+import math
 
 import numpy as np
 import pytest
 
-from conveyor_twin.bench import clog
+from conveyor_twin.bench import clog, clog_reference, clog_scenes
 from conveyor_twin.cell import load_cell
+from conveyor_twin.cell.model import ObstacleKind
 
 
-@pytest.mark.parametrize('gap', [2, 3.5, 6])
-def test_gap_is_narrowed_to_the_asked_clear_width(gap):
+@pytest.mark.parametrize('gap', [1.5, 2, 3.5, 6])
+def test_deflector_gap_is_narrowed_to_the_asked_clear_width(gap):
     base = load_cell(None)
-    cell = clog.gap_cell(gap, base)
+    scene = clog_scenes.build_scene('deflector', gap, base)
+    cell = scene.cell
     d = 2.0 * base.part_types[0].radius
-    assert clog.clearance(cell) == pytest.approx(gap * d, abs=1e-9)
-    k = clog._deflector(cell)
+    assert clog_scenes.clearance(cell) == pytest.approx(gap * d, abs=1e-9)
+    assert scene.clear_width == pytest.approx(gap * d, abs=1e-9)
+    k = clog_scenes._deflector(cell)
     # the deflector keeps its upstream end and its direction
     (ax, ay), (bx, by) = cell.obstacles[k].points
     (a0x, a0y), (b0x, b0y) = base.obstacles[k].points
     assert (ax, ay) == (a0x, a0y)
     cross = (bx - ax) * (b0y - a0y) - (by - ay) * (b0x - a0x)
     assert cross == pytest.approx(0.0, abs=1e-12)
+    assert scene.pass_line == pytest.approx(bx + 0.005 + 0.005)
     assert not (cell.sources or cell.sinks or cell.actuators or cell.light_barriers)
 
 
-def test_release_is_upstream_and_free_of_overlaps():
-    cell = clog.gap_cell(3)
+@pytest.mark.parametrize('gap', [1.5, 2, 2.5, 3, 4])
+def test_funnel_is_symmetric_and_opens_to_the_asked_clear_width(gap):
+    base = load_cell(None)
+    scene = clog_scenes.build_scene('funnel', gap, base)
+    cell = scene.cell
+    d = 2.0 * base.part_types[0].radius
+    assert not any(o.kind == ObstacleKind.DEFLECTOR for o in cell.obstacles)
+    left, right = (next(o for o in cell.obstacles if o.name == n)
+                   for n in clog_scenes.FUNNEL_NAMES)
+    (lx0, ly0), (lx1, ly1) = left.points
+    (rx0, ry0), (rx1, ry1) = right.points
+    assert (lx0, lx1) == (rx0, rx1) and (ly0, ly1) == (-ry0, -ry1)
+    # each wall at the funnel angle to +x, from the side wall to the opening
+    assert math.degrees(math.atan2(ly0 - ly1, lx1 - lx0)) == pytest.approx(
+        clog_scenes.FUNNEL_ANGLE_DEG)
+    assert ly0 == pytest.approx(0.255)
+    # the clear width, measured by sampling both wall surfaces: narrowest at the opening
+    s = np.linspace(0.0, 1.0, 2001)
+    pl = np.stack([lx0 + s * (lx1 - lx0), ly0 + s * (ly1 - ly0)], axis=1)
+    pr = np.stack([rx0 + s * (rx1 - rx0), ry0 + s * (ry1 - ry0)], axis=1)
+    dist = np.hypot(*(pl[:, None, :] - pr[None, :, :]).transpose(2, 0, 1))
+    width = dist.min() - 0.5 * (left.thickness + right.thickness)
+    assert width == pytest.approx(gap * d, abs=1e-9)
+    assert scene.clear_width == pytest.approx(gap * d, abs=1e-9)
+    assert clog_scenes.funnel_clearance(cell) == pytest.approx(gap * d, abs=1e-9)
+    assert scene.pass_line == pytest.approx(lx1 + 0.5 * left.thickness + d / 2)
+    assert lx1 == max(p[0] for p in base.obstacles[clog_scenes._deflector(base)].points)
+
+
+def test_segments_distance_matches_sampling():
+    rng = np.random.default_rng(7)
+    s = np.linspace(0.0, 1.0, 401)
+    for _ in range(30):
+        a, b, c, e = rng.uniform(-1.0, 1.0, (4, 2))
+        p = a + s[:, None] * (b - a)
+        q = c + s[:, None] * (e - c)
+        sampled = np.hypot(*(p[:, None, :] - q[None, :, :]).transpose(2, 0, 1)).min()
+        exact = clog_scenes.segments_distance(a, b, c, e)
+        assert exact <= sampled + 1e-12
+        assert sampled - exact < 0.01
+
+
+@pytest.mark.parametrize('name', clog_scenes.SCENES)
+def test_release_is_upstream_and_free_of_overlaps(name):
+    scene = clog_scenes.build_scene(name, 3)
+    cell = scene.cell
     r = cell.part_types[0].radius
-    pts = clog.release_positions(cell, 150, seed=4)
+    pts = scene.release(150, seed=4)
     assert pts.shape == (150, 2)
-    assert clog.deepest_overlap(pts, r) == 0.0
+    assert clog_scenes.deepest_overlap(pts, r) == 0.0
     assert np.abs(pts[:, 1]).max() < 0.25 - r
-    deflector = cell.obstacles[clog._deflector(cell)]
-    assert pts[:, 0].max() < min(p[0] for p in deflector.points) - r
-    assert not np.array_equal(pts, clog.release_positions(cell, 150, seed=5))
-    assert np.array_equal(pts, clog.release_positions(cell, 150, seed=4))
+    bottleneck = [o for o in cell.obstacles
+                  if o.kind == ObstacleKind.DEFLECTOR or o.name in clog_scenes.FUNNEL_NAMES]
+    assert pts[:, 0].max() < min(p[0] for o in bottleneck for p in o.points) - r
+    assert not np.array_equal(pts, scene.release(150, seed=5))
+    assert np.array_equal(pts, scene.release(150, seed=4))
 
 
 def test_deepest_overlap_equals_all_pairs():
@@ -46,33 +97,51 @@ def test_deepest_overlap_equals_all_pairs():
         pts = rng.uniform(0.0, 0.12, (60, 2))
         d = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
         d[np.diag_indices(60)] = np.inf
-        assert clog.deepest_overlap(pts, r) == pytest.approx(max(0.0, 2 * r - d.min()),
-                                                              abs=1e-15)
+        assert clog_scenes.deepest_overlap(pts, r) == pytest.approx(
+            max(0.0, 2 * r - d.min()), abs=1e-15)
 
 
 def test_tiny_run_of_both_engines_reports_figures_in_range(capsys):
     pytest.importorskip('pymunk')
-    assert clog.main(['--gaps', '6', '--seeds', '2', '--parts', '30', '--window', '1.5',
+    assert clog.main(['--gaps', '4', '--seeds', '2', '--parts', '30', '--window', '1.5',
                       '--json']) == 0
     report = json.loads(capsys.readouterr().out)
     assert report['parts'] == 30 and report['seeds'] == 2 and report['window_s'] == 1.5
-    assert report['quiet_s'] == 1.0 and report['pymunk']['slop_m'] == clog.PYMUNK_SLOP
-    entry = report['gaps']['6']
-    assert entry['gap_m'] == pytest.approx(0.06)
-    for engine in ('ours', 'pymunk'):
-        runs = entry[engine]
-        assert len(runs) == 2
-        for run in runs:
-            assert 0 <= run['passed'] <= 30
-            assert run['fraction_passed'] == run['passed'] / 30
-            assert 0.0 <= run['max_overlap_pct'] < 100.0
-            # a six-diameter gap and a single row of parts: they flow, nothing clogs
-            assert run['passed'] > 0 and not run['stopped']
-            assert 0.5 <= run['last_pass_s'] <= 1.5
-        s = entry['summary'][engine]
-        assert s['runs'] == 2 and s['stopped'] == 0 and s['clog_probability'] == 0.0
-        assert 0.0 < s['fraction_passed_min'] <= s['fraction_passed_mean'] <= 1.0
+    assert report['quiet_s'] == 1.0 and report['pymunk'] == clog_reference.settings()
+    assert set(report['scenes']) == set(clog_scenes.SCENES)
+    for name in clog_scenes.SCENES:
+        entry = report['scenes'][name]['4']
+        assert entry['gap_m'] == pytest.approx(0.04)
+        for engine in ('twin', 'reference'):
+            runs = entry[engine]
+            assert len(runs) == 2
+            for run in runs:
+                assert 0 <= run['passed'] <= 30
+                assert run['fraction_passed'] == run['passed'] / 30
+                assert 0.0 <= run['max_overlap_pct'] < 100.0
+                # a four-diameter opening and a few parts: they flow, nothing clogs
+                assert run['passed'] > 0 and not run['stopped']
+                assert 0.5 <= run['last_pass_s'] <= 1.5
+            s = entry['summary'][engine]
+            assert s['runs'] == 2 and s['stopped'] == 0 and s['clog_probability'] == 0.0
+            assert 0.0 < s['fraction_passed_min'] <= s['fraction_passed_mean'] <= 1.0
+        assert entry['verdict']['clog_inside']
     assert 'To, Lai and Pak' in report['literature']
+
+
+def test_parallel_jobs_give_the_same_runs(capsys):
+    args = ['--scene', 'funnel', '--gaps', '3', '--seeds', '2', '--parts', '20', '--window',
+            '0.5', '--skip-pymunk', '--json']
+    assert clog.main(args) == 0
+    one = json.loads(capsys.readouterr().out)
+    assert clog.main(args + ['--jobs', '2']) == 0
+    two = json.loads(capsys.readouterr().out)
+
+    def figures(report):
+        return [{k: v for k, v in run.items() if k != 'wall_s'}
+                for run in report['scenes']['funnel']['3']['twin']]
+    assert figures(one) == figures(two) and len(figures(one)) == 2
+    assert 'reference' not in one['scenes']['funnel']['3']['summary']
 
 
 def test_wilson_interval():
@@ -80,9 +149,76 @@ def test_wilson_interval():
     lo, hi = clog.wilson(5, 10)
     assert lo < 0.5 < hi and lo == pytest.approx(1.0 - hi)
     assert clog.wilson(1, 10) == pytest.approx(tuple(1.0 - b for b in clog.wilson(9, 10)[::-1]))
+    # textbook values: 0 of 20 -> [0, 0.161], 3 of 5 -> [0.231, 0.882]
+    assert clog.wilson(0, 20)[1] == pytest.approx(0.1611, abs=1e-4)
+    assert clog.wilson(3, 5) == pytest.approx((0.2307, 0.8824), abs=1e-4)
+
+
+def _summary(stopped, runs, passed):
+    return {'stopped': stopped, 'runs': runs, 'clog_probability': stopped / runs,
+            'fraction_passed_mean': passed}
+
+
+def test_verdict_needs_the_clog_probability_inside_and_the_fraction_within_ten_points():
+    ref = _summary(12, 20, 0.30)          # interval [0.387, 0.781]
+    lo, hi = clog.wilson(12, 20)
+    v = clog.verdict(_summary(10, 20, 0.35), ref)
+    assert v['clog_inside'] and v['fraction_within'] and v['agrees']
+    assert v['reference_interval'] == [lo, hi]
+    assert v['fraction_passed_difference'] == pytest.approx(0.05)
+    v = clog.verdict(_summary(5, 20, 0.30), ref)        # 0.25 < 0.387
+    assert not v['clog_inside'] and v['fraction_within'] and not v['agrees']
+    v = clog.verdict(_summary(12, 20, 0.45), ref)       # 15 points more
+    assert v['clog_inside'] and not v['fraction_within'] and not v['agrees']
+    assert clog.verdict(_summary(12, 20, 0.40), ref)['fraction_within']   # 10 points: inside
+    assert clog.verdict(_summary(0, 20, 1.0), _summary(0, 20, 0.95))['agrees']
+
+
+def test_a_reference_file_for_other_parameters_is_refused(tmp_path, capsys):
+    pytest.importorskip('pymunk')
+    path = str(tmp_path / 'reference.json')
+    base = ['--scene', 'funnel', '--gaps', '3', '--seeds', '1', '--parts', '5', '--window',
+            '0.2']
+    assert clog.main(base + ['--save-reference', path, '--json']) == 0
+    saved = json.loads(capsys.readouterr().out)
+    assert saved['scenes']['funnel']['3']['twin'] == []
+    assert clog.main(base + ['--reference', path, '--json']) == 0
+    used = json.loads(capsys.readouterr().out)
+    assert used['scenes']['funnel']['3']['reference'] == saved['scenes']['funnel']['3'][
+        'reference']
+    for other, field in ((['--window', '0.3'], 'window_s'), (['--parts', '6'], 'parts'),
+                         (['--gaps', '2.5'], 'funnel/2.5'), (['--seeds', '2'], 'seed 2'),
+                         (['--scene', 'deflector'], 'deflector/3'),
+                         (['--pymunk-iterations', '50'], 'pymunk')):
+        assert clog.main(base + other + ['--reference', path]) == 2
+        err = capsys.readouterr().err
+        assert path in err and field in err, err
+    # the scene's geometry changed since the file was made
+    with open(path, encoding='utf-8') as f:
+        data = json.load(f)
+    data['entries']['funnel/3']['parameters']['obstacles'][-1]['friction'] = 0.3
+    with open(path, 'w', encoding='utf-8') as f:
+        json.dump(data, f)
+    scene = clog_scenes.build_scene('funnel', 3)
+    loaded = clog_reference.load(path, 5, 0.2, clog_reference.settings())
+    with pytest.raises(ValueError, match=r'funnel/3: obstacles\[\d\]\.friction is 0.3'):
+        clog_reference.runs_for(loaded, path, scene, [(1, scene.release(5, 1))])
+    with pytest.raises(ValueError, match='start positions'):
+        data = clog_reference.load(path, 5, 0.2, clog_reference.settings())
+        data['entries']['funnel/3']['parameters'] = scene.parameters()
+        clog_reference.runs_for(data, path, scene, [(1, scene.release(5, 2))])
+    with open(path, 'w', encoding='utf-8') as f:
+        f.write('{"format": "something else"}')
+    with pytest.raises(ValueError, match='not a bench clog reference'):
+        clog_reference.load(path, 5, 0.2, clog_reference.settings())
 
 
 def test_a_gap_that_is_not_positive_or_wider_than_the_cells_is_refused():
     for gap in (0.0, -1.0, 15.0):
         with pytest.raises(ValueError):
-            clog.gap_cell(gap)
+            clog_scenes.gap_cell(gap)
+    for gap in (0.0, -1.0, 50.0):
+        with pytest.raises(ValueError, match='funnel gap'):
+            clog_scenes.funnel_cell(gap)
+    with pytest.raises(ValueError, match='scene'):
+        clog_scenes.build_scene('hopper', 2)

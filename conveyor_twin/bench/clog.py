@@ -1,296 +1,50 @@
 """``conveyor-twin bench clog``: clogging at a bottleneck, the micro simulator against a converged
-pymunk reference on the same scenes.
+pymunk reference on the same scenes, gap by gap.
 
-The scene is the default cell's belt and deflector with the gap between the deflector's tip
-and the right wall narrowed to G part diameters (the deflector is extended along its own line
-until the clear width between its surface and the wall's is G d); sources, sinks, light
-barriers and actuators are left out. N of the cell's parts (spacers, d = 10 mm) are released
-upstream of the deflector at the belt speed, on a hexagonal lattice of pitch
-:data:`RELEASE_PITCH` diameters with every centre moved at random by up to
-:data:`RELEASE_JITTER` of a diameter (one random draw per seed, the same positions for both
-engines). The belt carries them against the deflector; they slide along it to the gap.
+Two scenes on the default cell's belt (:mod:`conveyor_twin.bench.clog_scenes`): ``deflector``,
+the cell's 45° deflector extended until its tip leaves G part diameters to the side wall, parts
+released on a jittered lattice; ``funnel``, two symmetric walls at 30° to the running direction
+narrowing to an opening of G diameters, parts released at random upstream. N spacers
+(d = 10 mm) start at the belt speed, the same positions for both engines per seed. A part has
+*passed* once its centre is a radius beyond the bottleneck; a run has *stopped* (clogged) when
+no part passed during the last second of the window while parts remain upstream.
 
-A part has *passed* once its centre is more than a radius beyond the tip of the deflector
-(its end cap included). A run is *stopped* when no part passed during the last
-:data:`QUIET` s of the window while parts remain upstream: the flow has clogged. Per run the
-benchmark also reports the fraction passed, the time of the last passage and the deepest
-overlap between two parts (sampled every :data:`SAMPLE` s, as % of a diameter).
+Per scene and gap: the clog counts of both engines with their 95 % Wilson intervals, the fraction
+passed (mean and range), the deepest overlap between two parts (sampled every 10 ms, % of a
+diameter) and a verdict: the twin agrees when its clog probability lies inside the reference's
+interval and its mean fraction passed within :data:`PASSED_TOLERANCE` of the reference's.
 
-The reference is pymunk (Chipmunk2D) built by :func:`conveyor_twin.bench.micro.pymunk_peer`,
-the peer of ``bench micro``: same geometry, per-pair friction and restitution, the same belt
-drive; here run close to convergence: :data:`PYMUNK_ITERATIONS` solver iterations,
-``collision_slop`` :data:`PYMUNK_SLOP` m, step :data:`PYMUNK_STEP` s. Ours runs the cell as
-it is (1 ms steps, its own substeps).
+The reference (:mod:`conveyor_twin.bench.clog_reference`) is pymunk at 100 iterations and
+0.5 ms steps; ``--save-reference FILE`` runs it alone and keeps its per-run results,
+``--reference FILE`` uses them instead of running it again, ``--convergence`` runs it at 200
+iterations and at 0.25 ms steps as well.
 
-The trend from the granular-flow literature: the probability that an arch stops the discharge
-of a given amount of grains falls steeply as the opening grows relative to the grain size
-(To, Lai and Pak, *Jamming of granular flow in a two-dimensional hopper*: from near one to near
-zero over about three to five disc diameters; Janda et al., *Jamming and critical outlet size
-in the discharge of a two-dimensional silo*: the chance of passing N grains without a jam
-decays exponentially in N, the mean number between jams grows steeply with the outlet;
-Zuriguel et al., *Jamming during the discharge of granular matter from a silo*: the same in
-three dimensions).
-
-Measured on the shared 2-core machine (load average ~3.5, pymunk 7.3.1), defaults, stopped runs
-of 10 (ours / pymunk): 2 d 0 / 6 (passed 100 % / 20 %), 3-6 d 0 / 0 (all passed in both);
-``--gaps 2.5``: 0 / 2 (passed 100 % / 60 %). Deepest overlap ours 6.7-14.6 % of a diameter,
-pymunk 0.9-1.2 %. 8.9 min wall clock, almost all of it pymunk's; ours 10 s for the 50 runs.
+Measured (defaults, 20 seeds; the table is in docs/validation.md, "Clogging at a bottleneck"):
+the twin agrees with the reference in 4 of the 10 cases (1.5, 3 and 4 d at the deflector, 4 d
+in the funnel); at 2 and 2.5 d it clogs more often (deflector 20 and 12 of 20 runs against 11
+and 6; funnel 20 and 20 against 3 and 1). The twin's 200 runs take 1.8 min of CPU, a reference
+run about ten times a twin run's CPU.
 """
 
 import argparse
-import dataclasses
 import json
 import math
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from conveyor_twin.bench import clog_reference as reference
+from conveyor_twin.bench.clog_scenes import SCENES, Scene, build_scene, quiet_time, run_twin
 from conveyor_twin.cell import load_cell
-from conveyor_twin.cell.model import Cell, ObstacleKind
-from conveyor_twin.micro import MicroSim
 
-DEFAULT_GAPS = (2, 3, 4, 5, 6)      # clear width of the gap [part diameters]
-DEFAULT_SEEDS = 10                  # runs per gap (seeds 1..n)
+DEFAULT_GAPS = (1.5, 2, 2.5, 3, 4)  # clear width of the gap [part diameters]
+DEFAULT_SEEDS = 20                  # runs per scene and gap (seeds 1..n)
 DEFAULT_PARTS = 150
 DEFAULT_WINDOW = 5.0                # s of simulated time per run
-QUIET = 1.0                         # s without a passage at the end of the window: stopped
-SAMPLE = 0.01                       # s between two looks at the positions
-RELEASE_PITCH = 1.1                 # lattice pitch of the release [part diameters]
-RELEASE_JITTER = 0.04               # largest random move of a released centre [diameters]
-RELEASE_MARGIN = 0.002              # m between the release block and the deflector / walls
-PYMUNK_ITERATIONS = 150
-PYMUNK_SLOP = 1e-4                  # m
-PYMUNK_STEP = 2.5e-4                # s
-
-
-def _deflector(cell: Cell) -> int:
-    for index, obstacle in enumerate(cell.obstacles):
-        if obstacle.kind == ObstacleKind.DEFLECTOR:
-            return index
-    raise ValueError(f'cell {cell.settings.name!r} has no deflector')
-
-
-def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-    e = b - a
-    f = min(1.0, max(0.0, float((p - a) @ e) / float(e @ e)))
-    return float(np.hypot(*(p - (a + f * e))))
-
-
-def clearance(cell: Cell) -> float:
-    """Return the clear width between the deflector's tip and the nearest wall [m]."""
-    k = _deflector(cell)
-    deflector = cell.obstacles[k]
-    tip = np.asarray(deflector.points[-1], dtype=float)
-    best = math.inf
-    for obstacle in cell.obstacles:
-        if obstacle.kind != ObstacleKind.WALL:
-            continue
-        a, b = (np.asarray(q, dtype=float) for q in obstacle.points)
-        gap = (_segment_distance(tip, a, b) - 0.5 * obstacle.thickness
-               - 0.5 * deflector.thickness)
-        best = min(best, gap)
-    return best
-
-
-def gap_cell(gap: float, base: Optional[Cell] = None) -> Cell:
-    """Return the default cell (or ``base``) with its gap narrowed to ``gap`` part diameters.
-
-    The deflector's downstream end moves along the deflector's line until the clear width
-    between it and the nearest wall is ``gap`` diameters of the first part type. Sources,
-    sinks, light barriers and actuators are removed: the benchmark places the parts itself.
-    """
-    cell = load_cell(None) if base is None else base
-    k = _deflector(cell)
-    deflector = cell.obstacles[k]
-    (ax, ay), (bx, by) = deflector.points
-    u = np.array([bx - ax, by - ay]) / math.hypot(bx - ax, by - ay)
-    want = gap * 2.0 * cell.part_types[0].radius
-    if not 0.0 < want <= clearance(cell):
-        raise ValueError(f'gap {gap} d is not positive or wider than the cell\'s '
-                         f'{clearance(cell):.3f} m')
-
-    def moved(s: float) -> Cell:
-        points = ((ax, ay), (bx + s * u[0], by + s * u[1]))
-        obstacles = list(cell.obstacles)
-        obstacles[k] = dataclasses.replace(deflector, points=points)
-        return dataclasses.replace(cell, obstacles=tuple(obstacles))
-
-    # march toward the wall in steps of a tenth of the wanted width, then bisect (the
-    # clearance falls while the tip approaches the wall and rises again beyond it)
-    lo, hi = 0.0, 0.1 * want
-    while clearance(moved(hi)) > want:
-        lo, hi = hi, hi + 0.1 * want
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        if clearance(moved(mid)) > want:
-            lo = mid
-        else:
-            hi = mid
-    out = moved(0.5 * (lo + hi))
-    return dataclasses.replace(out, sources=(), sinks=(), light_barriers=(), actuators=())
-
-
-def pass_line(cell: Cell) -> float:
-    """Return x [m] beyond which a part's centre has passed the deflector's tip."""
-    deflector = cell.obstacles[_deflector(cell)]
-    tip_x = max(p[0] for p in deflector.points)
-    return tip_x + 0.5 * deflector.thickness + cell.part_types[0].radius
-
-
-def release_positions(cell: Cell, n: int, seed: int) -> np.ndarray:
-    """Return (n, 2) centres [m] upstream of the deflector, a jittered hexagonal lattice.
-
-    Rows across the belt, from just upstream of the deflector's upstream end against the
-    belt direction; the pitch (:data:`RELEASE_PITCH`) less twice the jitter
-    (:data:`RELEASE_JITTER`) is still more than a diameter, so no two parts overlap.
-    """
-    r = cell.part_types[0].radius
-    d = 2.0 * r
-    pitch = RELEASE_PITCH * d
-    jitter = RELEASE_JITTER * d
-    deflector = cell.obstacles[_deflector(cell)]
-    x_front = (min(p[0] for p in deflector.points) - 0.5 * deflector.thickness - r - jitter
-               - RELEASE_MARGIN)
-    y_max = 0.5 * cell.belts[0].width - r - jitter - RELEASE_MARGIN
-    pts: List[tuple] = []
-    row = 0
-    while len(pts) < n:
-        x = x_front - row * pitch * math.sqrt(3.0) / 2.0
-        if x < r + jitter:
-            raise ValueError(f'{n} parts do not fit upstream of the deflector')
-        y = -y_max + (0.5 * pitch if row % 2 else 0.0)
-        while y <= y_max and len(pts) < n:
-            pts.append((x, y))
-            y += pitch
-        row += 1
-    rng = np.random.default_rng(seed)
-    angle = rng.uniform(0.0, 2.0 * math.pi, n)
-    radius = jitter * np.sqrt(rng.uniform(0.0, 1.0, n))
-    return np.array(pts) + np.stack([radius * np.cos(angle), radius * np.sin(angle)], axis=1)
-
-
-def deepest_overlap(pts: np.ndarray, radius: float) -> float:
-    """Return the deepest overlap of two discs of ``radius`` centred at ``pts`` [m] (exact)."""
-    if len(pts) < 2:
-        return 0.0
-    p = pts[np.argsort(pts[:, 0])]
-    d = 2.0 * radius
-    deepest = 0.0
-    for shift in range(1, len(p)):
-        dx = p[shift:, 0] - p[:-shift, 0]
-        near = dx < d
-        if not near.any():
-            break   # sorted by x: every larger shift is at least as far apart
-        gap = np.hypot(dx[near], p[shift:, 1][near] - p[:-shift, 1][near])
-        deepest = max(deepest, float(d - gap.min()))
-    return deepest
-
-
-class Watch:
-    """Passages, the last one's time and the deepest overlap of one run, sample by sample."""
-
-    def __init__(self, n: int, line: float, radius: float) -> None:
-        self.passed = np.zeros(n, dtype=bool)
-        self.line = line
-        self.radius = radius
-        self.last_pass = None
-        self.deepest = 0.0
-
-    def look(self, t: float, pts: np.ndarray) -> None:
-        now = pts[:, 0] > self.line
-        if np.any(now & ~self.passed):
-            self.last_pass = t
-        self.passed |= now
-        self.deepest = max(self.deepest, deepest_overlap(pts, self.radius))
-
-    def result(self, window: float, wall_s: float) -> Dict:
-        n = self.passed.size
-        passed = int(self.passed.sum())
-        quiet = self.last_pass is None or self.last_pass <= window - quiet_time(window)
-        d = 2.0 * self.radius
-        return {'passed': passed, 'fraction_passed': passed / n if n else 0.0,
-                'stopped': bool(quiet and passed < n),
-                'last_pass_s': self.last_pass,
-                'max_overlap_pct': 100.0 * self.deepest / d, 'wall_s': wall_s}
-
-
-def quiet_time(window: float) -> float:
-    """Return the span at the end of a ``window`` [s] without passages that means stopped."""
-    return min(QUIET, window)
-
-
-def _samples(window: float, dt: float):
-    """Yield (steps to take, time after them) for samples every :data:`SAMPLE` s."""
-    per = max(1, int(round(SAMPLE / dt)))
-    total = int(round(window / dt))
-    done = 0
-    while done < total:
-        k = min(per, total - done)
-        done += k
-        yield k, done * dt
-
-
-def run_ours(cell: Cell, positions: np.ndarray, window: float, seed: int) -> Dict:
-    """Run our micro simulator on the scene for ``window`` s; return the run's figures."""
-    t0 = time.perf_counter()
-    part = cell.part_types[0]
-    cell = dataclasses.replace(cell, micro=dataclasses.replace(
-        cell.micro, capacity=max(len(positions), 1)))
-    sim = MicroSim(cell, seed=seed)
-    sim.spawn(0, positions[:, 0], positions[:, 1], 0.0, vx=cell.belts[0].speed)
-    watch = Watch(len(positions), pass_line(cell), part.radius)
-    for k, t in _samples(window, sim.dt):
-        sim.step(k)
-        view = sim.parts_view()
-        watch.look(t, np.stack([view.x, view.y], axis=1))
-        if watch.passed.all():
-            break
-    return watch.result(window, time.perf_counter() - t0)
-
-
-def run_pymunk(cell: Cell, positions: np.ndarray, window: float, *,
-               iterations: int = PYMUNK_ITERATIONS, slop: float = PYMUNK_SLOP,
-               step: float = PYMUNK_STEP) -> Dict:
-    """Run the pymunk reference on the scene for ``window`` s; return the run's figures."""
-    import pymunk.batch
-
-    from conveyor_twin.bench.micro import pymunk_peer
-
-    t0 = time.perf_counter()
-    space, drive, dt = pymunk_peer(cell, positions, iterations=iterations, slop=slop,
-                                   step=step)
-    ids_buf = pymunk.batch.Buffer()
-    pymunk.batch.get_space_bodies(space, pymunk.batch.BodyFields.BODY_ID, ids_buf)
-    ids = np.frombuffer(ids_buf.int_buf(), dtype=np.uintp)
-    dynamic = ids != space.static_body.id
-    buf = pymunk.batch.Buffer()
-    watch = Watch(len(positions), pass_line(cell), cell.part_types[0].radius)
-    for k, t in _samples(window, dt):
-        for _ in range(k):
-            drive()
-            space.step(dt)
-        buf.clear()
-        pymunk.batch.get_space_bodies(space, pymunk.batch.BodyFields.POSITION, buf)
-        pts = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 2)[dynamic]
-        watch.look(t, pts)
-        if watch.passed.all():
-            break
-    return watch.result(window, time.perf_counter() - t0)
-
-
-def summary(runs: Sequence[Dict]) -> Dict:
-    """Return the ensemble figures of one engine at one gap."""
-    stopped = sum(r['stopped'] for r in runs)
-    n = len(runs)
-    frac = np.array([r['fraction_passed'] for r in runs])
-    return {'runs': n, 'stopped': stopped, 'clog_probability': stopped / n if n else None,
-            'fraction_passed_mean': float(frac.mean()) if n else None,
-            'fraction_passed_min': float(frac.min()) if n else None,
-            'fraction_passed_max': float(frac.max()) if n else None,
-            'max_overlap_pct': max((r['max_overlap_pct'] for r in runs), default=None),
-            'wall_s': float(sum(r['wall_s'] for r in runs))}
+PASSED_TOLERANCE = 0.10             # largest difference of the mean fraction passed
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple:
@@ -304,91 +58,254 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple:
     return (max(0.0, centre - half), min(1.0, centre + half))
 
 
-def run(gaps: Sequence[float], seeds: int, parts: int, window: float, *,
-        pymunk: bool = True, iterations: int = PYMUNK_ITERATIONS, slop: float = PYMUNK_SLOP,
-        step: float = PYMUNK_STEP, on_gap=None) -> Dict:
+def summary(runs: Sequence[Dict]) -> Dict:
+    """Return the ensemble figures of one engine at one gap."""
+    stopped = sum(r['stopped'] for r in runs)
+    n = len(runs)
+    frac = np.array([r['fraction_passed'] for r in runs])
+    lo, hi = wilson(stopped, n)
+    return {'runs': n, 'stopped': stopped, 'clog_probability': stopped / n if n else None,
+            'clog_interval': [lo, hi],
+            'fraction_passed_mean': float(frac.mean()) if n else None,
+            'fraction_passed_min': float(frac.min()) if n else None,
+            'fraction_passed_max': float(frac.max()) if n else None,
+            'max_overlap_pct': max((r['max_overlap_pct'] for r in runs), default=None),
+            'wall_s': float(sum(r['wall_s'] for r in runs))}
+
+
+def verdict(twin: Dict, ref: Dict, tolerance: float = PASSED_TOLERANCE) -> Dict:
+    """Return whether the twin's summary agrees with the reference's.
+
+    Agreement: the twin's clog probability inside the reference's 95 % Wilson interval, and
+    its mean fraction passed within ``tolerance`` of the reference's.
+    """
+    lo, hi = wilson(ref['stopped'], ref['runs'])
+    p = twin['clog_probability']
+    inside = lo <= p <= hi
+    diff = twin['fraction_passed_mean'] - ref['fraction_passed_mean']
+    within = abs(diff) <= tolerance + 1e-12
+    return {'reference_interval': [lo, hi], 'clog_inside': inside,
+            'fraction_passed_difference': diff, 'fraction_within': within,
+            'agrees': inside and within}
+
+
+def _one(task: tuple) -> Dict:
+    """Run one seed of one engine (a worker process's job)."""
+    engine, name, gap, seed, parts, window, pymunk = task
+    scene = build_scene(name, gap)
+    pts = scene.release(parts, seed)
+    if engine == 'twin':
+        return run_twin(scene, pts, window, seed)
+    return reference.run_pymunk(scene, pts, window, iterations=pymunk['iterations'],
+                                slop=pymunk['slop_m'], step=pymunk['step_s'])
+
+
+def _run_tasks(tasks: List[tuple], pool: Optional[ProcessPoolExecutor]) -> List[Dict]:
+    if pool is None:
+        return [_one(t) for t in tasks]
+    return list(pool.map(_one, tasks))
+
+
+def run(scenes: Sequence[str], gaps: Sequence[float], seeds: int, parts: int, window: float, *,
+        twin: bool = True, pymunk: Optional[Dict] = None, ref_mode: Optional[str] = 'run',
+        ref_path: Optional[str] = None, jobs: int = 1, on_gap=None) -> Dict:
     """Run the benchmark; return its report.
 
-    ``on_gap(key, entry)`` is called after each gap with its runs and summaries.
+    ``ref_mode``: ``'run'`` (run pymunk), ``'load'`` (read the runs from ``ref_path``),
+    ``'save'`` (run pymunk, write every run to ``ref_path`` as it comes) or None (no
+    reference). ``on_gap(scene, gap key, entry)`` is called after each gap.
     """
+    pymunk = pymunk or reference.settings()
     report: Dict = {'parts': parts, 'seeds': seeds, 'window_s': window,
-                    'quiet_s': quiet_time(window),
-                    'sample_s': SAMPLE,
-                    'pymunk': {'iterations': iterations, 'slop_m': slop, 'step_s': step}
-                    if pymunk else None, 'gaps': {}}
+                    'quiet_s': quiet_time(window), 'pymunk': pymunk if ref_mode else None,
+                    'reference': ref_path if ref_mode in ('load', 'save') else ref_mode,
+                    'passed_tolerance': PASSED_TOLERANCE, 'scenes': {}}
     base = load_cell(None)
     report['part_diameter_m'] = 2.0 * base.part_types[0].radius
-    report['default_gap_m'] = clearance(base)
-    for gap in gaps:
-        cell = gap_cell(gap, base)
-        entry: Dict = {'gap_m': clearance(cell), 'pass_line_x_m': pass_line(cell),
-                       'ours': [], 'pymunk': []}
-        for seed in range(1, seeds + 1):
-            pts = release_positions(cell, parts, seed)
-            entry['ours'].append(run_ours(cell, pts, window, seed))
-            if pymunk:
-                entry['pymunk'].append(run_pymunk(cell, pts, window, iterations=iterations,
-                                                  slop=slop, step=step))
-        entry['summary'] = {'ours': summary(entry['ours'])}
-        if pymunk:
-            entry['summary']['pymunk'] = summary(entry['pymunk'])
-        report['gaps'][f'{gap:g}'] = entry
-        if on_gap:
-            on_gap(f'{gap:g}', entry)
+    data = None
+    if ref_mode == 'load':
+        data = reference.load(ref_path, parts, window, pymunk)
+    elif ref_mode == 'save':
+        data = reference.new_file(parts, window, pymunk)
+    # check the whole file (and build every scene) before the first run
+    plan = [(name, gap, build_scene(name, gap, base)) for name in scenes for gap in gaps]
+    stored = {}
+    if data is not None and ref_mode == 'load':
+        for name, gap, scene in plan:
+            stored[(name, gap)] = reference.runs_for(
+                data, ref_path, scene, ((s, scene.release(parts, s)) for s in range(1, seeds + 1)))
+    pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else None
+    try:
+        for name, gap, scene in plan:
+            entry = _gap_entry(scene, seeds, parts, window, twin, pymunk, ref_mode,
+                               stored.get((name, gap)), pool)
+            if ref_mode == 'save':
+                for seed, run_ in enumerate(entry['reference'], start=1):
+                    reference.add(data, scene, seed, scene.release(parts, seed), run_)
+                reference.save(data, ref_path)
+            report['scenes'].setdefault(name, {})[f'{gap:g}'] = entry
+            if on_gap:
+                on_gap(name, f'{gap:g}', entry)
+    finally:
+        if pool is not None:
+            pool.shutdown()
     return report
 
 
-def _line(gap: str, entry: Dict) -> str:
-    parts = [f'G = {gap:>3} d ({entry["gap_m"] * 1e3:5.1f} mm)']
-    for name in ('ours', 'pymunk'):
-        s = entry['summary'].get(name)
-        if s is None:
-            continue
-        lo, hi = wilson(s['stopped'], s['runs'])
-        parts.append(f'{name}: stopped {s["stopped"]}/{s["runs"]} = '
-                     f'{s["clog_probability"]:.2f} [{lo:.2f}, {hi:.2f}], passed '
-                     f'{s["fraction_passed_mean"]:.0%} ({s["fraction_passed_min"]:.0%}-'
-                     f'{s["fraction_passed_max"]:.0%}), overlap <= '
-                     f'{s["max_overlap_pct"]:.1f} % d, {s["wall_s"]:.1f} s')
-    return ' | '.join(parts)
+def _gap_entry(scene: Scene, seeds: int, parts: int, window: float, twin: bool, pymunk: Dict,
+               ref_mode: Optional[str], stored: Optional[list],
+               pool: Optional[ProcessPoolExecutor]) -> Dict:
+    entry: Dict = {'gap_m': scene.clear_width, 'pass_line_x_m': scene.pass_line,
+                   'twin': [], 'reference': []}
+    engines = (['twin'] if twin else []) + (['pymunk'] if ref_mode in ('run', 'save') else [])
+    tasks = [(engine, scene.name, scene.gap, seed, parts, window, pymunk)
+             for engine in engines for seed in range(1, seeds + 1)]
+    results = _run_tasks(tasks, pool)
+    for task, result in zip(tasks, results):
+        entry['twin' if task[0] == 'twin' else 'reference'].append(result)
+    if stored is not None:
+        entry['reference'] = stored
+    entry['summary'] = {}
+    for name in ('twin', 'reference'):
+        if entry[name]:
+            entry['summary'][name] = summary(entry[name])
+    if 'twin' in entry['summary'] and 'reference' in entry['summary']:
+        entry['verdict'] = verdict(entry['summary']['twin'], entry['summary']['reference'])
+    return entry
 
+
+def _cell_text(s: Optional[Dict]) -> List[str]:
+    if s is None:
+        return ['-', '-', '-']
+    lo, hi = s['clog_interval']
+    return [f'{s["stopped"]}/{s["runs"]} [{lo:.2f}, {hi:.2f}]',
+            f'{s["fraction_passed_mean"]:.0%} ({s["fraction_passed_min"]:.0%}-'
+            f'{s["fraction_passed_max"]:.0%})', f'{s["max_overlap_pct"]:.1f}']
+
+
+def line(gap: str, entry: Dict) -> str:
+    """Return one row of the text table."""
+    t = _cell_text(entry['summary'].get('twin'))
+    r = _cell_text(entry['summary'].get('reference'))
+    v = entry.get('verdict')
+    if v is None:
+        word = '-'
+    else:
+        word = 'agrees' if v['agrees'] else 'differs (' + ', '.join(
+            w for w, bad in (('clog', not v['clog_inside']), ('passed', not v['fraction_within']))
+            if bad) + ')'
+    return (f'{gap:>4} d {entry["gap_m"] * 1e3:5.1f} mm | {t[0]:>18} {r[0]:>18} | '
+            f'{t[1]:>16} {r[1]:>16} | {t[2]:>5} {r[2]:>5} | {word}')
+
+
+HEADER = ('   gap   width |  clogged: twin     reference     |   passed: twin  reference      '
+          '| overlap % d | verdict')
 
 LITERATURE = ('literature (To, Lai and Pak; Janda et al.; Zuriguel et al.): the probability of '
               'a clog falls steeply as the opening grows, in 2D hoppers from near 1 to near 0 '
               'over a narrow range of openings of a few diameters')
 
 
+def _parse_gaps(values: Sequence[str]) -> List[float]:
+    return [float(g) for v in values for g in v.split(',') if g]
+
+
+def _print_convergence(k: str, label: str, runs: List[Dict]) -> None:
+    s = summary(runs)
+    lo, hi = s['clog_interval']
+    print(f'{k}: {label}: stopped {s["stopped"]}/{s["runs"]} [{lo:.2f}, {hi:.2f}], passed '
+          f'{s["fraction_passed_mean"]:.0%} ({s["fraction_passed_min"]:.0%}-'
+          f'{s["fraction_passed_max"]:.0%}), overlap <= {s["max_overlap_pct"]:.1f} % d, '
+          f'{s["wall_s"]:.0f} s', flush=True)
+
+
+def _convergence(args, gaps: List[float], pymunk: Dict) -> Dict:
+    scenes = [build_scene(name, gap) for name in _scenes(args) for gap in gaps]
+    base_runs = {}
+    if args.reference:
+        data = reference.load(args.reference, args.parts, args.window, pymunk)
+        for scene in scenes:
+            base_runs[reference.key(scene.name, scene.gap)] = reference.runs_for(
+                data, args.reference, scene,
+                ((s, scene.release(args.parts, s)) for s in range(1, args.seeds + 1)))
+    return reference.convergence(scenes, args.seeds, args.parts, args.window, base_runs,
+                                 on_setting=None if args.json else _print_convergence)
+
+
+def _scenes(args) -> List[str]:
+    return list(SCENES) if args.scene == 'both' else [args.scene]
+
+
+def parser() -> argparse.ArgumentParser:
+    """Return the command line parser."""
+    p = argparse.ArgumentParser(prog='conveyor-twin bench clog', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument('--json', action='store_true', help='print one JSON object')
+    p.add_argument('--scene', choices=SCENES + ('both',), default='both')
+    p.add_argument('--gaps', nargs='+', default=[','.join(f'{g:g}' for g in DEFAULT_GAPS)],
+                   help='gap widths [part diameters], separated by spaces or commas')
+    p.add_argument('--seeds', type=int, default=DEFAULT_SEEDS, help='runs per scene and gap')
+    p.add_argument('--parts', type=int, default=DEFAULT_PARTS, help='parts per run')
+    p.add_argument('--window', type=float, default=DEFAULT_WINDOW,
+                   help='simulated time per run [s]')
+    p.add_argument('--jobs', type=int, default=1, help='runs in parallel processes')
+    p.add_argument('--skip-pymunk', action='store_true', help='run the twin only')
+    p.add_argument('--reference', metavar='FILE',
+                   help='take the reference runs from FILE (made by --save-reference)')
+    p.add_argument('--save-reference', metavar='FILE',
+                   help='run the reference alone and write its runs to FILE')
+    p.add_argument('--convergence', action='store_true',
+                   help='run the reference at 200 iterations and at 0.25 ms steps too')
+    p.add_argument('--pymunk-iterations', type=int, default=reference.PYMUNK_ITERATIONS)
+    p.add_argument('--pymunk-slop', type=float, default=reference.PYMUNK_SLOP, help='[m]')
+    p.add_argument('--pymunk-step', type=float, default=reference.PYMUNK_STEP, help='[s]')
+    return p
+
+
 def main(argv: List[str]) -> int:
-    """Run the benchmark; print a table or (``--json``) one JSON object."""
-    parser = argparse.ArgumentParser(prog='conveyor-twin bench clog', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--json', action='store_true', help='print one JSON object')
-    parser.add_argument('--gaps', default=','.join(map(str, DEFAULT_GAPS)),
-                        help='comma-separated gap widths [part diameters]')
-    parser.add_argument('--seeds', type=int, default=DEFAULT_SEEDS, help='runs per gap')
-    parser.add_argument('--parts', type=int, default=DEFAULT_PARTS, help='parts per run')
-    parser.add_argument('--window', type=float, default=DEFAULT_WINDOW,
-                        help='simulated time per run [s]')
-    parser.add_argument('--skip-pymunk', action='store_true', help='run ours only')
-    parser.add_argument('--pymunk-iterations', type=int, default=PYMUNK_ITERATIONS)
-    parser.add_argument('--pymunk-slop', type=float, default=PYMUNK_SLOP, help='[m]')
-    parser.add_argument('--pymunk-step', type=float, default=PYMUNK_STEP, help='[s]')
-    args = parser.parse_args(argv)
-    gaps = [float(g) for g in args.gaps.split(',') if g]
-    if args.seeds < 1 or args.parts < 1 or args.window <= 0.0 or not gaps or min(gaps) <= 0:
-        parser.error('--gaps positive, --seeds and --parts at least 1, --window positive')
-    if not args.json:
-        print(f'{args.parts} parts, {args.seeds} seeds per gap, {args.window:g} s window; '
-              f'stopped: no passage in the last {quiet_time(args.window):g} s with parts '
-              'upstream (95 % Wilson interval)')
-        if not args.skip_pymunk:
-            print(f'pymunk: {args.pymunk_iterations} iterations, slop {args.pymunk_slop:g} m, '
-                  f'step {args.pymunk_step:g} s', flush=True)
+    """Run the benchmark; print a table per scene or (``--json``) one JSON object."""
+    p = parser()
+    args = p.parse_args(argv)
+    try:
+        gaps = _parse_gaps(args.gaps)
+    except ValueError:
+        p.error(f'--gaps: {" ".join(args.gaps)!r} is not a list of numbers')
+    if args.seeds < 1 or args.parts < 1 or args.window <= 0.0 or args.jobs < 1 or not gaps \
+            or min(gaps) <= 0:
+        p.error('--gaps positive, --seeds, --parts and --jobs at least 1, --window positive')
+    if args.reference and args.save_reference:
+        p.error('--reference and --save-reference exclude each other')
+    if args.skip_pymunk and (args.reference or args.save_reference or args.convergence):
+        p.error('--skip-pymunk excludes --reference, --save-reference and --convergence')
+    pymunk = reference.settings(args.pymunk_iterations, args.pymunk_slop, args.pymunk_step)
     t0 = time.perf_counter()
-    report = run(gaps, args.seeds, args.parts, args.window, pymunk=not args.skip_pymunk,
-                 iterations=args.pymunk_iterations, slop=args.pymunk_slop,
-                 step=args.pymunk_step,
-                 on_gap=None if args.json else lambda key, e: print(_line(key, e), flush=True))
+    try:
+        if args.convergence:
+            out = {'convergence': _convergence(args, gaps, pymunk), 'parts': args.parts,
+                   'seeds': args.seeds, 'window_s': args.window,
+                   'wall_s': time.perf_counter() - t0}
+            if args.json:
+                print(json.dumps(out))
+            return 0
+        mode = ('save' if args.save_reference else 'load' if args.reference
+                else None if args.skip_pymunk else 'run')
+        if not args.json:
+            _print_head(args, pymunk, mode)
+        last = [None]
+
+        def on_gap(scene: str, gap: str, entry: Dict) -> None:
+            if scene != last[0]:
+                print(f'\nscene {scene}\n{HEADER}')
+                last[0] = scene
+            print(line(gap, entry), flush=True)
+
+        report = run(_scenes(args), gaps, args.seeds, args.parts, args.window,
+                     twin=not args.save_reference, pymunk=pymunk, ref_mode=mode,
+                     ref_path=args.save_reference or args.reference, jobs=args.jobs,
+                     on_gap=None if args.json else on_gap)
+    except ValueError as err:
+        print(f'conveyor-twin bench clog: {err}', file=sys.stderr)
+        return 2
     report['wall_s'] = time.perf_counter() - t0
     report['literature'] = LITERATURE
     if args.json:
@@ -397,6 +314,19 @@ def main(argv: List[str]) -> int:
     print(LITERATURE)
     print(f'wall time {report["wall_s"]:.0f} s (load average {_load()})')
     return 0
+
+
+def _print_head(args, pymunk: Dict, mode: Optional[str]) -> None:
+    print(f'{args.parts} parts, {args.seeds} seeds per scene and gap, {args.window:g} s '
+          f'window; stopped: no passage in the last {quiet_time(args.window):g} s with parts '
+          'upstream (95 % Wilson interval); the twin agrees when its clog probability is inside '
+          f'the reference\'s interval and its mean fraction passed within '
+          f'{PASSED_TOLERANCE * 100:.0f} points')
+    if mode:
+        source = {'run': 'run now', 'save': f'run now, saved to {args.save_reference}',
+                  'load': f'from {args.reference}'}[mode]
+        print(f'reference: pymunk, {pymunk["iterations"]} iterations, slop '
+              f'{pymunk["slop_m"]:g} m, step {pymunk["step_s"]:g} s ({source})', flush=True)
 
 
 def _load() -> str:

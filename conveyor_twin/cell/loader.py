@@ -15,6 +15,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, TypeVar
 import yaml
 
 from conveyor_twin.cell.errors import CellError
+from conveyor_twin.cell.loader_curves import check_rail_names, guide_rails, read_curve
+from conveyor_twin.cell.reader import check_number, check_point, COORDINATE_LIMIT, KeyReader
 from conveyor_twin.cell.model import (
     ACTUATOR_KINDS, Actuator, AutoSwitch, Belt, Cell, CONTACT_MODELS, ContactModel, LightBarrier,
     MACRO_SCHEMES, MACRO_VARIANTS, MacroModel, MacroScheme, MacroVariant, MicroModel, Obstacle,
@@ -22,147 +24,11 @@ from conveyor_twin.cell.model import (
     SOURCE_PATTERNS, Zone, ZONE_POLICIES, ZonePolicy,
 )
 
+__all__ = ['cell_from_mapping', 'COORDINATE_LIMIT', 'default_cell_text', 'KeyReader',
+           'load_cell', 'load_cell_text']
+
 DEFAULT_CELL_NAME = 'default_cell.yaml'
-#: Largest coordinate of a point or rectangle [m]: a cell spans at most 2 km in x and in y.
-COORDINATE_LIMIT = 1000.0
-_REQUIRED = object()
-_INF = math.inf
 T = TypeVar('T')
-
-
-class KeyReader:
-    """Read keys of one YAML mapping, checking each; :meth:`done` rejects keys not read."""
-
-    def __init__(self, file: str, path: str, data: Any) -> None:
-        if not isinstance(data, dict):
-            raise CellError(file, path or '<top level>', data, 'a mapping of keys to values')
-        self.file = file
-        self.path = path
-        self.data = data
-        self.seen: set = set()
-
-    def key_path(self, key: Union[str, int]) -> str:
-        if isinstance(key, int):
-            return f'{self.path}[{key}]'
-        return f'{self.path}.{key}' if self.path else key
-
-    def fail(self, key: Union[str, int], value: Any, expected: str) -> CellError:
-        return CellError(self.file, self.key_path(key), value, expected)
-
-    def raw(self, key: str, default: Any = _REQUIRED) -> Any:
-        self.seen.add(key)
-        if key not in self.data or self.data[key] is None and default is not _REQUIRED:
-            if default is _REQUIRED:
-                raise self.fail(key, None, 'this required key to be present')
-            return default
-        return self.data[key]
-
-    def number(self, key: str, default: Any = _REQUIRED, *, low: float = -_INF,
-               high: float = _INF, low_open: bool = False) -> float:
-        """Read a finite number in [low, high] (or (low, high] with ``low_open``)."""
-        value = self.raw(key, default)
-        if value is default and default is not _REQUIRED:
-            return default
-        return _check_number(self, key, value, low, high, low_open)
-
-    def integer(self, key: str, default: Any = _REQUIRED, *, low: int = 0,
-                high: int = 2 ** 63 - 1) -> int:
-        value = self.raw(key, default)
-        if value is default and default is not _REQUIRED:
-            return default
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(key, value, f'an integer in [{low}, {high}]')
-        if not low <= value <= high:
-            raise self.fail(key, value, f'an integer in [{low}, {high}]')
-        return value
-
-    def string(self, key: str, default: Any = _REQUIRED,
-               choices: Optional[Sequence[str]] = None) -> str:
-        value = self.raw(key, default)
-        if value is default and default is not _REQUIRED:
-            return default
-        if not isinstance(value, str) or not value or not value.isprintable():
-            raise self.fail(key, value, 'a non-empty string of printable characters')
-        if choices is not None and value not in choices:
-            raise self.fail(key, value, 'one of ' + ', '.join(repr(c) for c in choices))
-        return value
-
-    def point(self, key: str, default: Any = _REQUIRED) -> Point:
-        value = self.raw(key, default)
-        if value is default and default is not _REQUIRED:
-            return default
-        return _check_point(self.file, self.key_path(key), value)
-
-    def points(self, key: str, min_count: int) -> Tuple[Point, ...]:
-        value = self.raw(key)
-        if not isinstance(value, list) or len(value) < min_count:
-            raise self.fail(key, value, f'a list of at least {min_count} [x, y] points [m]')
-        return tuple(_check_point(self.file, f'{self.key_path(key)}[{i}]', p)
-                     for i, p in enumerate(value))
-
-    def rect(self, key: str) -> Rect:
-        value = self.raw(key)
-        ok = isinstance(value, list) and len(value) == 4 and all(_is_coordinate(v) for v in value)
-        if not ok or not (value[0] < value[2] and value[1] < value[3]):
-            raise self.fail(key, value, '[x_min, y_min, x_max, y_max] [m] with min < max, '
-                            f'each within +-{COORDINATE_LIMIT:g}')
-        return (float(value[0]), float(value[1]), float(value[2]), float(value[3]))
-
-    def section(self, key: str, required: bool = False) -> 'KeyReader':
-        value = self.raw(key, _REQUIRED if required else {})
-        return type(self)(self.file, self.key_path(key), value)   # a subclass reads on
-
-    def items(self, key: str, required: bool = True) -> List['KeyReader']:
-        value = self.raw(key, _REQUIRED if required else [])
-        if not isinstance(value, list) or (required and not value):
-            raise self.fail(key, value, 'a non-empty list of mappings' if required else 'a list')
-        return [type(self)(self.file, self.key_path(key) + f'[{i}]', item)
-                for i, item in enumerate(value)]
-
-    def done(self) -> None:
-        """Raise on the first key that no reader asked for."""
-        for key in self.data:
-            if key not in self.seen:
-                raise self.fail(str(key), self.data[key],
-                                'no such key here; known keys: ' + ', '.join(sorted(self.seen)))
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def _is_finite(value: Any) -> bool:
-    """Return True for an int or float that is a finite float (an int too large for a float
-    is not)."""
-    if not _is_number(value):
-        return False
-    try:
-        return math.isfinite(value)
-    except OverflowError:
-        return False
-
-
-def _is_coordinate(value: Any) -> bool:
-    return _is_finite(value) and abs(value) <= COORDINATE_LIMIT
-
-
-def _check_number(reader: KeyReader, key: str, value: Any, low: float, high: float,
-                  low_open: bool) -> float:
-    bracket = '(' if low_open else '['
-    expected = f'a finite number in {bracket}{low:g}, {high:g}]'
-    if not _is_finite(value):
-        raise reader.fail(key, value, expected)
-    if value < low or value > high or (low_open and value == low):
-        raise reader.fail(key, value, expected)
-    return float(value)
-
-
-def _check_point(file: str, path: str, value: Any) -> Point:
-    if (not isinstance(value, list) or len(value) != 2
-            or not all(_is_coordinate(v) for v in value)):
-        raise CellError(file, path, value, 'a point [x, y] of two finite numbers [m] within '
-                        f'+-{COORDINATE_LIMIT:g}')
-    return (float(value[0]), float(value[1]))
 
 
 def _unique(readers: List[KeyReader], items: Sequence[T], what: str) -> None:
@@ -187,17 +53,23 @@ def _settings(r: KeyReader) -> Settings:
 
 
 def _belt(r: KeyReader) -> Belt:
-    start, end = r.point('start'), r.point('end')
-    if math.hypot(end[0] - start[0], end[1] - start[1]) <= 0.0:
-        raise r.fail('end', list(end), 'a point different from start (a belt of positive length)')
+    curve = None
+    if 'curve' in r.data:
+        curve, start, end, width = read_curve(r)
+    else:
+        start, end = r.point('start'), r.point('end')
+        if math.hypot(end[0] - start[0], end[1] - start[1]) <= 0.0:
+            raise r.fail('end', list(end),
+                         'a point different from start (a belt of positive length)')
+        width = r.number('width', low=0.0, high=10.0, low_open=True)
     max_speed = r.number('max_speed', 2.0, low=0.0, high=20.0, low_open=True)
     belt = Belt(
-        name=r.string('name'), start=start, end=end,
-        width=r.number('width', low=0.0, high=10.0, low_open=True),
+        name=r.string('name'), start=start, end=end, width=width,
         speed=r.number('speed', 0.0, low=-max_speed, high=max_speed),
         max_speed=max_speed,
         acceleration=r.number('acceleration', 1.0, low=0.0, high=1000.0, low_open=True),
         friction=r.number('friction', 0.3, low=0.0, high=5.0, low_open=True),
+        curve=curve,
     )
     r.done()
     return belt
@@ -280,12 +152,12 @@ def _source(r: KeyReader, part_names: Sequence[str]) -> Source:
                      'the name of a part type in part_types: ' + ', '.join(part_names))
     velocity = r.raw('velocity', 'belt')
     if velocity != 'belt':
-        velocity = _check_point(r.file, r.key_path('velocity'), velocity)
+        velocity = check_point(r.file, r.key_path('velocity'), velocity)
     else:
         velocity = None
     yaw = r.raw('yaw', 'random')
     if yaw != 'random':
-        yaw = _check_number(r, 'yaw', yaw, -math.pi, math.pi, False)
+        yaw = check_number(r, 'yaw', yaw, -math.pi, math.pi, False)
     else:
         yaw = None
     source = Source(
@@ -336,21 +208,50 @@ def _actuator(r: KeyReader) -> Actuator:
     if high <= low:
         raise r.fail('max_position', high, f'a value above min_position {low:g} [{unit}]')
     initial = r.number('initial_position', low, low=low, high=high)
-    engage = 0.0
-    if kind == 'stopper':
+    engage, surface_speed = 0.0, 0.0
+    if kind in ('stopper', 'transfer'):
         engage = r.number('engage_height', 0.5 * high, low=0.0, high=high, low_open=True)
+    if kind == 'transfer':
+        surface_speed = r.number('surface_speed', low=0.0, high=20.0, low_open=True)
     actuator = Actuator(
         name=name, kind=kind, base=r.point('base'), axis=axis,
         length=r.number('length', low=0.0, high=10.0, low_open=True),
         width=r.number('width', low=0.0, high=10.0, low_open=True),
         position_range=(low, high),
-        max_speed=r.number('max_speed', low=0.0, high=100.0, low_open=True),
+        max_speed=_max_speed(r, kind, high),
         initial_position=initial, engage_height=engage,
         restitution=r.number('restitution', 0.2, low=0.0, high=1.0),
-        friction=r.number('friction', 0.2, low=0.0, high=5.0),
+        friction=r.number('friction', 0.5 if kind == 'transfer' else 0.2, low=0.0, high=5.0),
+        surface_speed=surface_speed,
+        force_limit=_force_limit(r),
     )
     r.done()
     return actuator
+
+
+def _max_speed(r: KeyReader, kind: str, stroke: float) -> float:
+    """Read ``max_speed``, or for a transfer ``travel_time`` [s] instead (stroke / time)."""
+    if kind != 'transfer' or 'travel_time' not in r.data:
+        return r.number('max_speed', low=0.0, high=100.0, low_open=True)
+    if 'max_speed' in r.data:
+        r.seen.add('max_speed')
+        raise r.fail('max_speed', r.data['max_speed'],
+                     'either max_speed or travel_time, not both')
+    travel_time = r.number('travel_time', low=0.0, high=1e3, low_open=True)
+    if stroke / travel_time > 100.0:
+        raise r.fail('travel_time', travel_time, f'at least {stroke / 100.0:g} s (a lift speed '
+                     f'stroke / travel_time of at most 100 m/s)')
+    return stroke / travel_time
+
+
+def _force_limit(r: KeyReader) -> float:
+    """Read ``force_limit`` [N]: (0, 1e7], or ``.inf`` (the default) for unlimited."""
+    value = r.raw('force_limit', math.inf)
+    if isinstance(value, float) and value == math.inf:
+        return math.inf
+    if not isinstance(value, (int, float)) or isinstance(value, bool) or not 0.0 < value <= 1e7:
+        raise r.fail('force_limit', value, 'a force in (0, 1e+07] [N], or .inf (unlimited)')
+    return float(value)
 
 
 def _zone(r: KeyReader) -> Zone:
@@ -422,6 +323,9 @@ def cell_from_mapping(data: Any, source_file: str = '<memory>') -> Cell:
     settings = _settings(top.section('cell', required=True))
     belts = _list(top, 'belts', _belt, 'belt', required=True)
     obstacles = _list(top, 'obstacles', _obstacle, 'obstacle')
+    rails = guide_rails(belts)
+    check_rail_names(source_file, obstacles, rails)
+    obstacles += rails
     part_types = _list(top, 'part_types', _part_type, 'part type', required=True)
     if len(part_types) > 65535:
         raise top.fail('part_types', len(part_types), 'at most 65535 part types (uint16)')
@@ -460,9 +364,9 @@ def _check_macro_barriers(file: str, barriers: Sequence[LightBarrier],
 
 
 def _belts_bounds(belts: Sequence[Belt]) -> Rect:
-    xs = [c[0] for belt in belts for c in belt.corners()]
-    ys = [c[1] for belt in belts for c in belt.corners()]
-    return (min(xs), min(ys), max(xs), max(ys))
+    boxes = [belt.bounding_box() for belt in belts]
+    return (min(b[0] for b in boxes), min(b[1] for b in boxes),
+            max(b[2] for b in boxes), max(b[3] for b in boxes))
 
 
 def load_cell_text(text: str, source_file: str = '<memory>') -> Cell:

@@ -11,8 +11,10 @@ from enum import Enum
 import math
 from typing import Optional, Tuple
 
-Point = Tuple[float, float]
-Rect = Tuple[float, float, float, float]  # (x_min, y_min, x_max, y_max) [m]
+from conveyor_twin.cell.curves import (
+    BeltCurve, CONTAINS_TOLERANCE, curve_bounding_box, curve_contains, curve_outline, Point,
+    Rect,
+)
 
 
 class Mode(str, Enum):
@@ -47,12 +49,20 @@ class Settings:
 
 @dataclass(frozen=True)
 class Belt:
-    """A straight belt: a rectangle along the segment ``start``-``end`` of width ``width``.
+    """A belt: straight (a rectangle along ``start``-``end`` of ``width``) or curved.
+
+    A curved belt (``curve`` set) is the annular sector of :class:`BeltCurve`; its ``start`` and
+    ``end`` are the centre-line points at the start and end angles, ``width`` is
+    ``outer_radius - inner_radius`` and ``speed`` is the surface speed on the centre line. Use
+    the helpers :meth:`contains`, :meth:`surface_velocity`, :meth:`outline`,
+    :meth:`centre_line` and :meth:`bounding_box`, which work for both kinds; ``direction``,
+    ``angle`` and ``corners()`` exist for straight belts only.
 
     :param speed: initial target speed [m/s] along ``direction`` (negative runs backwards).
     :param max_speed: largest admissible |speed| [m/s]; commands beyond it are rejected.
     :param acceleration: largest rate of speed change [m/s^2].
     :param friction: part-belt Coulomb coefficient (drive force bounded by ``friction m g``).
+    :param curve: the arc geometry of a curved belt; None for a straight belt.
     """
 
     name: str
@@ -63,29 +73,94 @@ class Belt:
     max_speed: float
     acceleration: float
     friction: float
+    curve: Optional[BeltCurve] = None
 
     @property
     def length(self) -> float:
-        """Length of the belt [m]."""
+        """Length of the belt [m] (of the centre line for a curved belt)."""
+        if self.curve is not None:
+            return self.curve.centre_radius * abs(self.curve.sweep)
         return math.hypot(self.end[0] - self.start[0], self.end[1] - self.start[1])
+
+    def _straight_only(self, what: str) -> None:
+        if self.curve is not None:
+            raise ValueError(f'belt {self.name!r} is curved: it has no {what}; use contains(), '
+                             'surface_velocity(), outline() or centre_line()')
 
     @property
     def direction(self) -> Point:
-        """Unit vector of the running direction."""
+        """Unit vector of the running direction (straight belts only; ValueError if curved)."""
+        self._straight_only('single direction')
         length = self.length
         return ((self.end[0] - self.start[0]) / length, (self.end[1] - self.start[1]) / length)
 
     @property
     def angle(self) -> float:
-        """Heading of the running direction [rad]."""
+        """Heading of the running direction [rad] (straight belts only; ValueError if curved)."""
+        self._straight_only('single heading')
         return math.atan2(self.end[1] - self.start[1], self.end[0] - self.start[0])
 
     def corners(self) -> Tuple[Point, Point, Point, Point]:
-        """Return the four corners of the belt surface, counter-clockwise [m]."""
+        """Return the four corners of the belt surface, counter-clockwise [m] (straight belts
+        only; ValueError if curved)."""
+        self._straight_only('four corners')
         dx, dy = self.direction
         nx, ny = -dy * self.width / 2, dx * self.width / 2
         (x0, y0), (x1, y1) = self.start, self.end
         return ((x0 - nx, y0 - ny), (x1 - nx, y1 - ny), (x1 + nx, y1 + ny), (x0 + nx, y0 + ny))
+
+    def contains(self, point: Point) -> bool:
+        """Return True if ``point`` [m] lies on the belt surface, edges included (within
+        :data:`CONTAINS_TOLERANCE`)."""
+        if self.curve is not None:
+            return curve_contains(self.curve, point)
+        tol = CONTAINS_TOLERANCE
+        dx, dy = self.direction
+        rx, ry = point[0] - self.start[0], point[1] - self.start[1]
+        along, across = rx * dx + ry * dy, -rx * dy + ry * dx
+        return -tol <= along <= self.length + tol and abs(across) <= 0.5 * self.width + tol
+
+    def surface_velocity(self, point: Point, speed: float) -> Point:
+        """Return the surface velocity [m/s] at ``point`` [m] when the belt runs at ``speed``
+        [m/s]: ``speed * direction`` (straight), or the rigid rotation omega x r about the
+        centre with omega = direction * speed / centre_radius [rad/s] (curved)."""
+        c = self.curve
+        if c is None:
+            dx, dy = self.direction
+            return (speed * dx, speed * dy)
+        omega = c.direction * speed / c.centre_radius
+        return (-omega * (point[1] - c.centre[1]), omega * (point[0] - c.centre[0]))
+
+    def outline(self, max_chord_error: float = 1e-4) -> Tuple[Point, ...]:
+        """Return the surface outline as a closed polygon, counter-clockwise, first point not
+        repeated [m]. A curved belt's arcs are chords within ``max_chord_error`` [m] of the
+        arcs (a full-turn belt gives a keyhole polygon: outer circle, then inner circle back)."""
+        if self.curve is not None:
+            return curve_outline(self.curve, max_chord_error)
+        return self.corners()
+
+    def centre_line(self, n: int) -> Tuple[Point, ...]:
+        """Return ``n`` >= 2 points evenly spaced along the centre line from ``start`` to
+        ``end`` [m]."""
+        if n < 2:
+            raise ValueError(f'belt {self.name!r}: centre_line needs n >= 2 points, got {n}')
+        c = self.curve
+        if c is None:
+            (x0, y0), (x1, y1) = self.start, self.end
+            return tuple((x0 + (x1 - x0) * i / (n - 1), y0 + (y1 - y0) * i / (n - 1))
+                         for i in range(n))
+        sweep = c.sweep
+        return tuple(c.point(c.centre_radius, c.start_angle + sweep * i / (n - 1))
+                     for i in range(n))
+
+    def bounding_box(self) -> Rect:
+        """Return the axis-aligned bounding rectangle of the surface [m] (exact for both
+        kinds: the corners, plus the outer arc's extreme points inside a curve's sweep)."""
+        if self.curve is not None:
+            return curve_bounding_box(self.curve)
+        corners = self.corners()
+        xs, ys = [p[0] for p in corners], [p[1] for p in corners]
+        return (min(xs), min(ys), max(xs), max(ys))
 
 
 class ObstacleKind(Mode):
@@ -217,7 +292,7 @@ class LightBarrier:
     height: float
 
 
-ACTUATOR_KINDS = ('pusher', 'stopper', 'diverter')
+ACTUATOR_KINDS = ('pusher', 'stopper', 'diverter', 'transfer')
 
 
 @dataclass(frozen=True)
@@ -230,9 +305,19 @@ class Actuator:
     ``base``; position is its lift [m]; it blocks parts while lifted at least ``engage_height``.
     ``diverter``: an arm of ``length`` and thickness ``width`` rotating about the pivot ``base``;
     at position θ [rad] it points along ``axis`` rotated by θ.
+    ``transfer``: a lifting roller or belt transfer unit, footprint ``length`` along ``axis``
+    (the direction it carries parts) by ``width``, centred at ``base``; position is its lift
+    [m]. While lifted at least ``engage_height`` the surface under its footprint is its own
+    (velocity ``surface_speed * axis``, Coulomb coefficient ``friction``), below that the belt
+    beneath it; it has no collision shape.
 
     :param position_range: admissible (min, max) position; commands outside are rejected.
     :param max_speed: [m/s] or [rad/s]. :param initial_position: position at reset.
+    :param engage_height: stopper and transfer: lift [m] from which it acts on parts.
+    :param friction: Coulomb coefficient against parts (transfer: part-roller).
+    :param surface_speed: transfer only: carrying speed along ``axis`` [m/s]; 0 otherwise.
+    :param force_limit: largest force the actuator exerts on parts [N] (a diverter: at its
+        contact points); beyond it the actuator stalls. ``math.inf``: unlimited.
     """
 
     name: str
@@ -247,6 +332,8 @@ class Actuator:
     engage_height: float = 0.0
     restitution: float = 0.2
     friction: float = 0.2
+    surface_speed: float = 0.0
+    force_limit: float = math.inf
 
     @property
     def is_rotary(self) -> bool:
@@ -426,6 +513,6 @@ class Cell:
     @property
     def bounds(self) -> Rect:
         """Bounding rectangle of all belts [m]."""
-        xs = [c[0] for belt in self.belts for c in belt.corners()]
-        ys = [c[1] for belt in self.belts for c in belt.corners()]
-        return (min(xs), min(ys), max(xs), max(ys))
+        boxes = [belt.bounding_box() for belt in self.belts]
+        return (min(b[0] for b in boxes), min(b[1] for b in boxes),
+                max(b[2] for b in boxes), max(b[3] for b in boxes))

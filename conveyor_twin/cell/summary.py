@@ -1,19 +1,31 @@
 """One-paragraph human summary of a cell (``conveyor-twin validate``)."""
 
-from conveyor_twin.cell.model import Cell
+import math
+
+from conveyor_twin.cell.model import Belt, Cell
 
 
 def _names(items: tuple) -> str:
     return ', '.join(item.name for item in items) if items else 'none'
 
 
+def _belt(b: Belt) -> str:
+    shape = f'{b.name} {b.length:g} m x {b.width:g} m'
+    if b.curve is not None:
+        c = b.curve
+        turn = 'ccw' if c.direction > 0 else 'cw'
+        shape += (f' ({abs(math.degrees(c.sweep)):g} deg {turn} curve, radius '
+                  f'{c.inner_radius:g}..{c.outer_radius:g} m' + (', guide rails)' if c.guide_rails
+                                                                  else ')'))
+    return (f'{shape} at {b.speed:g} m/s (max {b.max_speed:g} m/s, {b.acceleration:g} m/s^2, '
+            f'mu {b.friction:g})')
+
+
 def summarize(cell: Cell) -> str:
     """Return a one-paragraph summary of ``cell``: geometry, parts, flow, sensors, actuators."""
     s = cell.settings
     x0, y0, x1, y1 = cell.bounds
-    belts = '; '.join(f'{b.name} {b.length:g} m x {b.width:g} m at {b.speed:g} m/s '
-                      f'(max {b.max_speed:g} m/s, {b.acceleration:g} m/s^2, mu {b.friction:g})'
-                      for b in cell.belts)
+    belts = '; '.join(_belt(b) for b in cell.belts)
     parts = '; '.join(
         f'{p.name} ({p.shape} ' + (f'r {p.radius * 1e3:g} mm' if p.shape == 'disc'
                                    else f'{p.length * 1e3:g} x {p.width * 1e3:g} mm')

@@ -8,6 +8,7 @@ from typing import List
 BENCHES = {
     'micro': 'conveyor_twin.bench.micro',
     'clog': 'conveyor_twin.bench.clog',
+    'curve': 'conveyor_twin.bench.curve',
     'macro': 'conveyor_twin.bench.macro',
     'record': 'conveyor_twin.bench.record',
     'twin': 'conveyor_twin.bench.twin',

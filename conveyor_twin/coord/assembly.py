@@ -101,7 +101,8 @@ def build_twin(cell: Cell, *, seed: int, check_balance: Optional[bool] = None) -
     micro = MicroStage(cell, seed, macro_barriers=barriers)
     macro = MacroStage(cell, seed)
     coupling = ScaleCoupling(micro, macro, barriers=barriers, check=check_balance)
-    twin = Twin(cell, seed=seed, stages=[micro, macro, coupling])
+    twin = Twin(cell, seed=seed, stages=[micro, macro, coupling],
+                actuator_load=micro.actuator_load)
     return AssembledTwin(cell, seed, twin=twin, micro=micro, macro=macro, coupling=coupling)
 
 

@@ -148,7 +148,8 @@ def entity_state(cell: Cell, entity: Entity, parts: PartsView,
     """Return the pose and velocity of ``entity`` (a part: as the micro scale holds it; a belt:
     the centre of its surface, yaw along its running direction; a light barrier: the middle of
     its beam at its height, yaw along the beam; an actuator: a pusher's paddle centre, a
-    stopper's blade centre lifted by its position, a diverter's pivot with yaw along its arm).
+    stopper's blade or a transfer's footprint centre lifted by its position, a diverter's pivot
+    with yaw along its arm).
 
     :param actuator_position: actual position of every actuator [m or rad].
     :raises KeyError: if a part is not held by the micro scale.
@@ -161,6 +162,10 @@ def entity_state(cell: Cell, entity: Entity, parts: PartsView,
                       float(parts.vx[row]), float(parts.vy[row]), float(parts.wz[row]))
     if entity.kind == BELT:
         b = cell.belts[entity.index]
+        if b.curve is not None:  # the middle of its centre line, yaw along its tangent there
+            mx, my = b.centre_line(3)[1]
+            vx, vy = b.surface_velocity((mx, my), 1.0)
+            return Pose2D(mx, my, 0.0, math.atan2(vy, vx))
         return Pose2D((b.start[0] + b.end[0]) / 2, (b.start[1] + b.end[1]) / 2, 0.0, b.angle)
     if entity.kind == LIGHT_BARRIER:
         lb = cell.light_barriers[entity.index]
@@ -172,7 +177,7 @@ def entity_state(cell: Cell, entity: Entity, parts: PartsView,
     if a.kind == 'pusher':
         return Pose2D(a.base[0] + position * a.axis[0], a.base[1] + position * a.axis[1], 0.0,
                       heading)
-    if a.kind == 'stopper':
+    if a.kind in ('stopper', 'transfer'):
         return Pose2D(a.base[0], a.base[1], position, heading)
     return Pose2D(a.base[0], a.base[1], 0.0, heading + position)
 
@@ -185,6 +190,9 @@ def footprint_radius(cell: Cell, entity: Entity) -> float:
         return next(p.bounding_radius for p in cell.part_types if p.name == tags[1])
     if entity.kind == BELT:
         b = cell.belts[entity.index]
+        if b.curve is not None:  # the farthest outline vertex, plus the outline's chord error
+            middle = b.centre_line(3)[1]
+            return max(math.dist(middle, p) for p in b.outline(1e-3)) + 1e-3
         return math.hypot(b.length, b.width) / 2
     if entity.kind == LIGHT_BARRIER:
         lb = cell.light_barriers[entity.index]

@@ -82,6 +82,11 @@ def check_spawn(cell: Cell, part_type: str, x: Sequence[float], y: Sequence[floa
 def belt_region(belt: Belt) -> str:
     """Describe the surface of a belt (where a spawned part's centre may lie)."""
     (x0, y0), (x1, y1) = belt.start, belt.end
+    if belt.curve is not None:
+        c = belt.curve
+        return (f'belt {belt.name!r}: radius {c.inner_radius:g}..{c.outer_radius:g} m about '
+                f'({c.centre[0]:g}, {c.centre[1]:g}) from {math.degrees(c.start_angle):g} deg '
+                f'through {math.degrees(c.sweep):g} deg')
     if y0 == y1 and x0 <= x1:
         return (f'belt {belt.name!r}: x {x0:g}..{x1:g} m, y {y0 - belt.width / 2:g}..'
                 f'{y0 + belt.width / 2:g} m')
@@ -90,12 +95,8 @@ def belt_region(belt: Belt) -> str:
 
 
 def on_belt(belt: Belt, x: float, y: float) -> bool:
-    """True if (x, y) [m] lies on the surface of ``belt`` (edges included)."""
-    dx, dy = belt.direction
-    rx, ry = x - belt.start[0], y - belt.start[1]
-    along, across = rx * dx + ry * dy, -rx * dy + ry * dx
-    eps = 1e-9
-    return -eps <= along <= belt.length + eps and abs(across) <= belt.width / 2 + eps
+    """True if (x, y) [m] lies on the surface of ``belt`` (edges included, within 1e-9 m)."""
+    return belt.contains((x, y))
 
 
 def placement_problem(cell: Cell, x: float, y: float, radius: float) -> str:

@@ -77,6 +77,10 @@ class MicroStage:
         else:
             self._edges = _EMPTY_EDGES
 
+    def actuator_load(self) -> np.ndarray:
+        """Mean normal force the parts put on every actuator during the last step [N]."""
+        return self.sim.actuator_load
+
     def parts(self) -> Tuple[np.ndarray, ...]:
         """Return (id, part_type, x, y, yaw, vx, vy, wz) of every part, views [SI]."""
         v = self.sim.parts_view()

@@ -15,6 +15,8 @@ Each step ``k`` (the state after it is stamped ``k * dt``):
 import threading
 from typing import Callable, List, Optional, Protocol, Sequence
 
+import numpy as np
+
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.actuation import Actuation
 from conveyor_twin.coord.clock import step_ns
@@ -43,11 +45,15 @@ class Twin:
     :param stages: the stages stepped in this process, in order (the assembly,
         :func:`~conveyor_twin.coord.assembly.build_twin`, passes micro, macro and the scale
         coupling; the split layout's coordinator its remote stage).
+    :param actuator_load: returns the load [N] on every actuator measured in the step just
+        taken (the micro scale's), for the actuators' stalls; None: no stalls.
     """
 
-    def __init__(self, cell: Cell, *, seed: int, stages: Sequence[Stage] = ()) -> None:
+    def __init__(self, cell: Cell, *, seed: int, stages: Sequence[Stage] = (),
+                 actuator_load: Optional[Callable[[], Optional[np.ndarray]]] = None) -> None:
         self.lock = threading.RLock()
         self.stages: List[Stage] = list(stages)
+        self._actuator_load = actuator_load
         self.step_listeners: List[Callable[[StepInput, List[Command]], None]] = []
         self._last_commands: List[Command] = []
         self.commands = CommandBook(cell)
@@ -133,6 +139,8 @@ class Twin:
                 inp = self.prepare()
                 for stage in self.stages:
                     stage.advance(inp)
+                if self._actuator_load is not None:
+                    self.actuation.observe(self._actuator_load())
                 self.step_index = inp.step
                 for listener in self.step_listeners:
                     listener(inp, self._last_commands)

@@ -49,6 +49,18 @@ class Region:
         self.runs = np.zeros((g.ny * ((g.nx + 1) // 2) if self.tiles is not None else 0, 3),
                              dtype=np.int64)
         self.n_runs = 0
+        # cells where no released part may go: the active ones, and on a grid with curved
+        # belts the cells off every belt or solid (a spot of the release lattice could
+        # otherwise land behind a curve's guide rail)
+        self.off_surface: Optional[np.ndarray] = None
+        if any(b.curve is not None for b in cell.belts):
+            self.off_surface = ((sim.belt_index < 0) | (sim.solid != 0)).astype(np.uint8)
+        self.spot_refused = self.active
+        # the same for the releases from the density of micro tiles, padded with refused cells
+        # as far as the release lattice reaches beyond the grid (there no belt of the grid
+        # holds a spot); None on a grid without curved belts (the unpadded mask is used)
+        self.inner_refused: Optional[np.ndarray] = None
+        self.inner_pad = 0
         self.update_ranges()
         # boundary faces, in the grid's boundary-face order (outflow): views of one array,
         # left/right (ny, 1), bottom/top (1, nx)
@@ -66,6 +78,13 @@ class Region:
         self.offsets = lattice((self.w + 0.5) * g.h, 2.0 * radius + CLEARANCE)
         self.rot = np.zeros(1, dtype=np.int64)
         self.grid_box = np.array([g.origin_x, g.origin_y, g.h])
+        self.inner_box = self.grid_box
+        if self.off_surface is not None:
+            reach = float(np.abs(self.offsets).max()) * (2.0 * radius + CLEARANCE)
+            pad = self.inner_pad = int(math.ceil(reach / g.h)) + self.w + 2
+            self.inner_refused = np.ones((g.ny + 2 * pad, g.nx + 2 * pad), dtype=np.uint8)
+            self.inner_box = np.array([g.origin_x - pad * g.h, g.origin_y - pad * g.h, g.h])
+            self._pad_inner()
         # FIFO of the types of the parts deposited: (head, count, untyped releases)
         self.fifo = np.zeros(1024, dtype=np.int64)
         self.fstate = np.zeros(3, dtype=np.int64)
@@ -124,6 +143,14 @@ class Region:
         m = _ho.micro_blocks(t.macro, t.tc, g.ny, g.nx, self.blocks)
         self.ranges = self.blocks[:m]
         self.n_runs = _ho.inactive_runs(self.active, self.runs)
+        if self.off_surface is not None:
+            self.spot_refused = self.active | self.off_surface
+            self._pad_inner()
+
+    def _pad_inner(self) -> None:
+        if self.inner_refused is not None:
+            p = self.inner_pad
+            self.inner_refused[p:-p, p:-p] = self.spot_refused
 
     def inactive_mass(self) -> float:
         """Mass in the cells of micro tiles (flowing on, released as whole parts) [parts]."""

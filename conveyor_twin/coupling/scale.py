@@ -24,8 +24,11 @@ cell mask (all cells for ``macro``; the cells of macro tiles for ``auto``). Each
    a whole part, one part is placed at the window's mass centre (outside the grid for faces) with the
    local belt velocity, without overlap: a lattice of part-diameter offsets over the whole
    window is tried, downstream along the local flow first, never onto an active cell (so it
-   is not captured again); if all overlap, it waits. One part is taken from the window, the
-   fractional remainder stays (in micro tiles it flows on, so remainders are not stranded);
+   is not captured again) nor, on a grid with curved belts, onto a cell off the belts or
+   solid, nor (from the density of micro tiles) beyond the grid's edge (so it does not land
+   behind a guide rail); if all overlap, it waits. One part is
+   taken from the window, the fractional remainder stays (in micro tiles it flows on, so
+   remainders are not stranded);
 4. ``auto`` zones re-evaluate their tiles (:mod:`conveyor_twin.coupling.tiles`); a tile that turns
    macro captures its parts in step 1 of the next step, one that turns micro releases its
    density as whole parts (count-exact, remainders carried);
@@ -308,24 +311,30 @@ class ScaleCoupling:
                 (g.origin_x, y_end + off, vc[-1:], 0.0, 1.0))[side]
             self._release_from(region, region.face_acc[side], region.face_skip[side],
                                region.face_thr[side], 1.0, region.face_ranges[side], ox, oy,
-                               vel, nx_, ny_, False, region.rng)
+                               vel, nx_, ny_, False, region.rng,
+                               (region.grid_box, region.spot_refused))
         if region.tiles is not None and self._tries > 0 and region.ranges.shape[0]:
-            # the density in micro tiles flows on until a window holds a whole part
+            # the density in micro tiles flows on until a window holds a whole part (on a grid
+            # with curved belts never onto a spot beyond the grid: behind a curve's rail)
+            spots = ((region.grid_box, region.spot_refused) if region.inner_refused is None
+                     else (region.inner_box, region.inner_refused))
             self._release_from(region, region.sim.density, region.active, region.thr, g.h * g.h,
                                region.ranges, g.origin_x, g.origin_y, vc, 1.0, 0.0, True,
-                               region.rng_inner)
+                               region.rng_inner, spots)
 
     def _release_from(self, region: Region, acc: np.ndarray, skip: np.ndarray,
                       thr: np.ndarray, unit: float, ranges: np.ndarray, ox: float, oy: float,
                       vel: np.ndarray, nx_: float, ny_: float, along_flow: bool,
-                      rng: np.ndarray) -> None:
+                      rng: np.ndarray, refused: tuple) -> None:
+        """Release whole parts from ``acc``; ``refused = (grid_box, mask)``: the spots no
+        released part may take (see :func:`~conveyor_twin.coupling.handover.release_windows`)."""
         m = self.micro
         s = m.state
         w, h = region.w, region.sim.grid.h
         res = _ho.release_windows(
             (acc, skip, unit, thr, ranges), w,
             (ox, oy, h, vel, region.offsets, 2.0 * self.radius + CLEARANCE, nx_, ny_,
-             along_flow, region.grid_box, region.active),
+             along_flow, refused[0], refused[1]),
             self._tries, (self._cand, region.rot, self._near, self._bhead, self._bnext),
             (region.fifo, region.fstate, self.released_by_type, rng),
             (s.counters, s.ids, s.part_type, s.P, m.pt, m.shapes, m.shape_verts, m.act_state,

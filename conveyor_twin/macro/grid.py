@@ -13,7 +13,9 @@ conservation exact up to round-off:
 Construction of the field (Hoher et al.; Göttlich et al. 2014):
 
 1. Cell-centre belt velocity: the speed of the belt whose rectangle holds the centre times its
-   direction (later belts in the cell win where belts overlap; no belt: at rest).
+   direction (later belts in the cell win where belts overlap; no belt: at rest). A curved
+   belt's cells take its rigid rotation, an engaged transfer unit's cells its own velocity
+   (:mod:`conveyor_twin.macro.curves`).
 2. Solid cells: every cell whose square is reached by an obstacle (wall/deflector capsule chains,
    pegs, convex polygons) or an engaged actuator. The test is a conservative square-shape
    distance, so a thin diagonal deflector always rasterises to an 8-connected staircase and never
@@ -24,7 +26,9 @@ Construction of the field (Hoher et al.; Göttlich et al. 2014):
    replaced by ``w``: ``v <- v + (w - v . n) n``. Material slides along deflectors and queues in
    front of walls; a moving pusher face carries what it meets at its own speed.
 4. Faces: the mean of the two neighbouring cell-centre components; zero if either cell is solid.
-   Domain-edge faces take the edge cell's component.
+   Domain-edge faces take the edge cell's component. Faces of a curved belt take the clamped
+   stream function's flux instead (exact and divergence-free, arcs as streamlines), except
+   where a neighbouring cell is solid, slides, or is on another belt.
 """
 
 from dataclasses import dataclass
@@ -35,6 +39,7 @@ from numba import njit
 import numpy as np
 
 from conveyor_twin.cell.model import Actuator, Belt, Cell, Obstacle, Rect, Zone
+from conveyor_twin.macro import curves as _curves
 
 # Fluid cells within this many cells (Chebyshev) of an actuator's solid cells get its sliding
 # constraint; for fixed obstacles the band is a parameter of rasterise_static.
@@ -222,8 +227,9 @@ def actuator_polygon(actuator: Actuator, position: float) -> np.ndarray:
 
 
 def actuator_engaged(actuator: Actuator, position: float) -> bool:
-    """Return True if ``actuator`` is a solid region at ``position`` (a stopper only if lifted)."""
-    if actuator.kind == 'stopper':
+    """Return True if ``actuator`` acts at ``position``: a stopper (a solid region) or a
+    transfer unit (a carrying surface) only if lifted to ``engage_height``."""
+    if actuator.kind in ('stopper', 'transfer'):
         return position >= actuator.engage_height
     return True
 
@@ -244,16 +250,24 @@ def actuator_wall_velocity(actuator: Actuator, position: float, rate: float, px:
 
 
 def belt_index_of_cells(grid: Grid, belts: Sequence[Belt]) -> np.ndarray:
-    """Return ``(ny, nx)`` int32: index of the belt under each cell centre, -1 for none."""
+    """Return ``(ny, nx)`` int32: index of the belt under each cell centre, -1 for none.
+
+    A curved belt also takes the cells no belt holds whose square reaches into its annulus
+    (:func:`conveyor_twin.macro.curves.add_rim_cells`).
+    """
     xc, yc = grid.centres()
     out = np.full((grid.ny, grid.nx), -1, dtype=np.int32)
     for k, belt in enumerate(belts):
+        if belt.curve is not None:
+            out[_curves.sector_mask(belt.curve, xc, yc)] = k
+            continue
         dx, dy = belt.direction
         rx, ry = xc - belt.start[0], yc - belt.start[1]
         along = rx * dx + ry * dy
         across = -rx * dy + ry * dx
         inside = (along >= 0.0) & (along <= belt.length) & (np.abs(across) <= 0.5 * belt.width)
         out[inside] = k
+    _curves.add_rim_cells(out, belts, xc, yc, grid.h)
     return out
 
 
@@ -322,8 +336,8 @@ def rasterise_actuators(grid: Grid, actuators: Sequence[Actuator], positions: np
     best = np.full((ny, nx), np.inf)
     tol = 1e-9 * grid.h
     for actuator, position, rate in zip(actuators, positions, rates):
-        if not actuator_engaged(actuator, float(position)):
-            continue
+        if actuator.kind == 'transfer' or not actuator_engaged(actuator, float(position)):
+            continue  # a transfer unit is a surface, not a solid (see MacroSim)
         poly = actuator_polygon(actuator, float(position))
         d, nx_, ny_ = _convex_polygon_shape(xc, yc, poly, grid.h)
         mask = d < -tol
@@ -343,15 +357,51 @@ def rasterise_actuators(grid: Grid, actuators: Sequence[Actuator], positions: np
     return solid.astype(np.uint8), normal, wall_speed, wall_velocity
 
 
+@njit(cache=True, inline='always')
+def _psi_cell(belt_idx: np.ndarray, solid: np.ndarray, normal_s: np.ndarray,
+              normal_a: np.ndarray, iy: int, ix: int, owner: int) -> int:
+    """Classify cell ``(iy, ix)`` for a face of curved belt ``owner``: 0 blocks its stream
+    function (solid, or on another belt), 1 passes it (outside the grid, or fluid on that
+    belt without a sliding constraint), 2 slides (on that belt, with a sliding constraint),
+    3 is fluid on no belt (the arcs bound the belt: a face to it always takes psi)."""
+    ny, nx = belt_idx.shape
+    if iy < 0 or ix < 0 or iy >= ny or ix >= nx:
+        return 1
+    k = belt_idx[iy, ix]
+    if solid[iy, ix] != 0 or (k != owner and k >= 0):
+        return 0
+    if k < 0:
+        return 3
+    if (normal_s[iy, ix, 0] != 0.0 or normal_s[iy, ix, 1] != 0.0
+            or normal_a[iy, ix, 0] != 0.0 or normal_a[iy, ix, 1] != 0.0):
+        return 2
+    return 1
+
+
+@njit(cache=True, inline='always')
+def _psi_face(ca: int, cb: int) -> bool:
+    """True if a face between cells of classes ``ca``, ``cb`` (:func:`_psi_cell`) takes psi."""
+    if ca == 0 or cb == 0:
+        return False
+    return (ca != 2 and cb != 2) or ca == 3 or cb == 3
+
+
 @njit(cache=True)
 def build_velocity(belt_idx: np.ndarray, belt_dir: np.ndarray, speeds: np.ndarray,
                    solid: np.ndarray, normal_s: np.ndarray, normal_a: np.ndarray,
                    wall_a: np.ndarray, vc: np.ndarray, ux: np.ndarray,
-                   uy: np.ndarray) -> float:
+                   uy: np.ndarray, curve: tuple) -> float:
     """Fill the cell and face velocities in place; return the largest cell outflow speed.
 
     :param belt_idx: ``(ny, nx)`` int32 belt index per cell, -1 for none.
     :param belt_dir: ``(nb, 2)`` unit running directions. :param speeds: ``(nb,)`` [m/s].
+    :param curve: ``(curved, own_x, own_y, unit_x, unit_y, unit_c)`` of
+        :func:`conveyor_twin.macro.curves.unit_fields`: a curved belt's cells take
+        ``speed * unit_c`` (then the sliding constraints as for straight belts), and a face
+        it owns takes ``speed * unit_x`` / ``unit_y`` if both its cells are fluid and on that
+        belt or on none, and neither has a sliding constraint unless the other is on no belt
+        (a curve's arcs always bound it); every other face is built as below. Straight belts
+        do not use it.
     :param solid: ``(ny, nx)`` uint8, 1 for solid (static or actuator).
     :param normal_s: ``(ny, nx, 2)`` fixed-obstacle sliding normals (zero: none).
     :param normal_a: ``(ny, nx, 2)`` actuator sliding normals. :param wall_a: their normal
@@ -361,6 +411,7 @@ def build_velocity(belt_idx: np.ndarray, belt_dir: np.ndarray, speeds: np.ndarra
     :return: ``max over cells of (max(ux_right, 0) + max(-ux_left, 0))`` and the same in y,
         whichever is larger [m/s]: the CFL speed of a split sweep.
     """
+    curved, own_x, own_y, unit_x, unit_y, unit_c = curve
     ny, nx = belt_idx.shape
     for iy in range(ny):
         for ix in range(nx):
@@ -368,8 +419,12 @@ def build_velocity(belt_idx: np.ndarray, belt_dir: np.ndarray, speeds: np.ndarra
             vy = 0.0
             k = belt_idx[iy, ix]
             if k >= 0 and solid[iy, ix] == 0:
-                vx = speeds[k] * belt_dir[k, 0]
-                vy = speeds[k] * belt_dir[k, 1]
+                if curved[k] != 0:
+                    vx = speeds[k] * unit_c[iy, ix, 0]
+                    vy = speeds[k] * unit_c[iy, ix, 1]
+                else:
+                    vx = speeds[k] * belt_dir[k, 0]
+                    vy = speeds[k] * belt_dir[k, 1]
                 for which in range(2):
                     if which == 0:
                         nnx = normal_s[iy, ix, 0]
@@ -404,6 +459,11 @@ def build_velocity(belt_idx: np.ndarray, belt_dir: np.ndarray, speeds: np.ndarra
                 v = 0.0
             else:
                 v = 0.5 * (vc[iy, ix - 1, 0] + vc[iy, ix, 0])
+            o = own_x[iy, ix]
+            if o >= 0 and _psi_face(_psi_cell(belt_idx, solid, normal_s, normal_a, iy, ix - 1, o),
+                                    _psi_cell(belt_idx, solid, normal_s, normal_a, iy, ix, o)):
+                v = speeds[o] * unit_x[iy, ix]
+                v = v if abs(v) > VELOCITY_EPS else 0.0
             ux[iy, ix] = v
     for iy in range(ny + 1):
         for ix in range(nx):
@@ -415,6 +475,11 @@ def build_velocity(belt_idx: np.ndarray, belt_dir: np.ndarray, speeds: np.ndarra
                 v = 0.0
             else:
                 v = 0.5 * (vc[iy - 1, ix, 1] + vc[iy, ix, 1])
+            o = own_y[iy, ix]
+            if o >= 0 and _psi_face(_psi_cell(belt_idx, solid, normal_s, normal_a, iy - 1, ix, o),
+                                    _psi_cell(belt_idx, solid, normal_s, normal_a, iy, ix, o)):
+                v = speeds[o] * unit_y[iy, ix]
+                v = v if abs(v) > VELOCITY_EPS else 0.0
             uy[iy, ix] = v
     smax = 0.0
     for iy in range(ny):

@@ -59,6 +59,7 @@ import numpy as np
 from conveyor_twin.cell.model import (Cell, MACRO_SCHEMES, MACRO_VARIANTS, MacroScheme,
                                       MacroVariant, Rect, Zone)
 from conveyor_twin.macro import collision as _col
+from conveyor_twin.macro import curves as _curves
 from conveyor_twin.macro import fluxes as _fx
 from conveyor_twin.macro import grid as _grid
 
@@ -200,12 +201,20 @@ class MacroSim:
         ny, nx = g.ny, g.nx
         self._rho = np.zeros((ny, nx))
         self._belt_idx = _grid.belt_index_of_cells(g, cell.belts)
-        self._belt_dir = np.array([b.direction for b in cell.belts], dtype=np.float64)
+        self._belt_dir = np.array([(0.0, 0.0) if b.curve is not None else b.direction
+                                   for b in cell.belts], dtype=np.float64)
         self._belt_dir = self._belt_dir.reshape(len(cell.belts), 2)
         self._speeds = np.array([b.speed for b in cell.belts], dtype=np.float64)
+        self._surfaces = _curves.Surfaces(g, cell, self._belt_idx, self._belt_dir, self._speeds)
         band_cells = max(1, int(round(slide_band / g.h)))
-        self._static_solid, self._normal_s = _grid.rasterise_static(g, cell.obstacles,
-                                                                    band_cells)
+        obstacles, rails = _curves.split_rails(cell.belts, cell.obstacles)
+        self._static_solid, self._normal_s = _grid.rasterise_static(g, obstacles, band_cells)
+        if rails:
+            xc, yc = g.centres()
+            rail_solid = ((_grid.rasterise_static(g, rails, 1)[0] != 0)
+                          | _curves.rail_cells(xc, yc, cell.belts, self._belt_idx))
+            rail_solid &= self._belt_idx < 0
+            self._static_solid |= rail_solid.astype(np.uint8)
         # Only actuators whose footprint can reach the grid matter.
         self._actuators = tuple(cell.actuators)
         self._positions = np.array([a.initial_position for a in cell.actuators], dtype=float)
@@ -290,6 +299,11 @@ class MacroSim:
         return self._solid
 
     @property
+    def belt_index(self) -> np.ndarray:
+        """``(ny, nx)`` int32 index of the belt each cell belongs to, -1 for none (a view)."""
+        return self._belt_idx
+
+    @property
     def cell_velocity(self) -> np.ndarray:
         """``(ny, nx, 2)`` cell-centre velocity of the belt field [m/s] (without operator)."""
         return self._vc
@@ -320,6 +334,7 @@ class MacroSim:
         if speeds.tolist() == self._speeds.tolist():  # np.array_equal, without its overhead
             return
         self._speeds[:] = speeds
+        self._surfaces.set_speeds(self._speeds)
         self._rebuild()
 
     def set_actuator_positions(self, positions: Sequence[float],
@@ -470,12 +485,14 @@ class MacroSim:
         solid_a, self._normal_a, self._wall_a, self._wall_vel = _grid.rasterise_actuators(
             self.grid, self._actuators, self._positions, self._rates, self._static_solid)
         self._solid = (self._static_solid | solid_a).astype(np.uint8)
+        self._surfaces.place(self._positions)
 
     def _rebuild(self) -> None:
         """Rebuild the face velocities and the CFL substep count."""
-        self._smax = _grid.build_velocity(self._belt_idx, self._belt_dir, self._speeds,
-                                          self._solid, self._normal_s, self._normal_a,
-                                          self._wall_a, self._vc, self._ux, self._uy)
+        f = self._surfaces
+        self._smax = _grid.build_velocity(f.idx, f.direction, f.speeds, self._solid,
+                                          self._normal_s, self._normal_a, self._wall_a,
+                                          self._vc, self._ux, self._uy, f.curve)
         np.copyto(self._wx, self._ux)
         np.copyto(self._wy, self._uy)
         _fx.y_ranges(self._uy, self._yr)

@@ -5,6 +5,8 @@
 ``base`` (``length`` along the axis), solid only while lifted at least ``engage_height``.
 ``diverter``: a capsule arm from the pivot ``base`` of ``length`` and thickness ``width``
 pointing along ``axis`` rotated by the position [rad], turning at ``position'`` about the pivot.
+``transfer``: no collision shape (never active here); its lift ramps like a stopper's and its
+surface is the surface lookup's (:mod:`conveyor_twin.micro.drive`).
 Within a step the position is interpolated linearly over the substeps.
 """
 
@@ -22,7 +24,9 @@ from conveyor_twin.micro.contacts.tables import (AS_ACTIVE, AS_COLUMNS, AS_E, AS
 KIND_PUSHER = 0
 KIND_STOPPER = 1
 KIND_DIVERTER = 2
-_KINDS = {'pusher': KIND_PUSHER, 'stopper': KIND_STOPPER, 'diverter': KIND_DIVERTER}
+KIND_TRANSFER = 3
+_KINDS = {'pusher': KIND_PUSHER, 'stopper': KIND_STOPPER, 'diverter': KIND_DIVERTER,
+          'transfer': KIND_TRANSFER}
 
 # --- actuator parameter columns ---
 AP_KIND = 0
@@ -107,7 +111,7 @@ def actuator_shapes(par, position, rate, state, verts):
                 cy += position[a] * ay
                 state[a, AS_VX] = rate[a] * ax
                 state[a, AS_VY] = rate[a] * ay
-            elif position[a] < par[a, AP_ENGAGE]:
+            elif kind == KIND_TRANSFER or position[a] < par[a, AP_ENGAGE]:
                 state[a, AS_ACTIVE] = 0.0
             _rect(cx, cy, ax, ay, 0.5 * par[a, AP_LENGTH], 0.5 * par[a, AP_WIDTH], verts[a])
             state[a, AS_NV] = 4

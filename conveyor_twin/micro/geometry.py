@@ -90,6 +90,11 @@ def world_bounds(cell: Cell, shapes: np.ndarray,
     xs: List[float] = []
     ys: List[float] = []
     for belt in cell.belts:
+        if belt.curve is not None:
+            x0, y0, x1, y1 = belt.bounding_box()
+            xs += [x0, x1]
+            ys += [y0, y1]
+            continue
         for c in belt.corners():
             xs.append(c[0])
             ys.append(c[1])

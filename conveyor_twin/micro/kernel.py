@@ -6,8 +6,9 @@ Each step (the state after step ``k`` is stamped ``k dt``):
 3. the pose at the step's start is saved (for light-barrier interpolation);
 4. ``m`` substeps of length ``dt / m``, each: actuator poses interpolated, belt friction on the
    velocities, broad phase (a neighbour list with a skin, rebuilt on a uniform grid when a part
-   moved too far or parts came or went) and near phase (contact records), then either the
-   impulses (velocities), positions ``x += h v`` (semi-implicit Euler) and the penetration
+   moved too far or parts came or went) and near phase (contact records, speculative ones for
+   the impulse model), then either the impulses (velocity sweeps to a tolerance, then the
+   restitution pass), positions ``x += h v`` (semi-implicit Euler) and the penetration
    correction, or the penalty forces (velocities) and ``x += h v``;
 5. light barriers sampled, edges recorded;
 6. parts in sinks or outside the region leave (arrays compacted, order kept).
@@ -21,6 +22,7 @@ import math
 
 from numba import njit
 
+from conveyor_twin.micro.actuator_load import add_actuator_load
 from conveyor_twin.micro.actuators import actuator_shapes, AP_LENGTH, AP_WIDTH
 from conveyor_twin.micro.contacts.broad_phase import update_pairs
 from conveyor_twin.micro.contacts.energy import limit_energy
@@ -29,7 +31,8 @@ from conveyor_twin.micro.contacts.impulses import (correct_positions, prepare_co
 from conveyor_twin.micro.contacts.narrow_phase import detect
 from conveyor_twin.micro.contacts.penalty import penalty_forces
 from conveyor_twin.micro.contacts.response import MODE_PENALTY
-from conveyor_twin.micro.contacts.tables import A_INERTIA, MP_DT, MP_TRACK
+from conveyor_twin.micro.contacts.restitution import restitute
+from conveyor_twin.micro.contacts.tables import A_INERTIA, MP_DT, MP_SPEC_MAX, MP_TRACK
 from conveyor_twin.micro.drive import belt_drive, ramp
 from conveyor_twin.micro.sensors import update_barriers
 from conveyor_twin.micro.sinks import leave
@@ -46,7 +49,7 @@ CF_MAX_TRAVEL = 3     # largest travel per substep [m]
 CF_PENALTY_DT = 4     # largest stable penalty substep [s]
 CF_MAX_SUB = 5        # most substeps per step
 CF_FLOOR_MU = 6
-CF_PASSES = 7         # impulse model: impulse sweeps over the contacts
+CF_PASSES = 7         # impulse model: most impulse sweeps over the contacts
 CF_SKIN = 8           # neighbour list skin [m] (see contacts.broad_phase.update_pairs)
 CF_POSITION_PASSES = 9  # impulse model: sweeps of the penetration correction
 CF_COLUMNS = 10
@@ -56,13 +59,15 @@ BV_TARGET = 0
 BV_SPEED = 1
 BV_LIMIT = 2          # largest change per step [m/s]
 
-# --- rows of the actuator array ``act_v`` (6, A) ---
+# --- rows of the actuator array ``act_v`` (AV_ROWS, A) ---
 AV_TARGET = 0
 AV_POSITION = 1       # at the end of the step
 AV_PREVIOUS = 2       # at the start of the step
 AV_RATE = 3           # during the step [m/s or rad/s]
 AV_LIMIT = 4          # largest change per step
 AV_SUB = 5            # at the current substep
+AV_LOAD = 6           # mean normal force of the parts on it during the step [N]
+AV_ROWS = 7
 
 
 @njit(cache=True)
@@ -102,7 +107,9 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
 
     :param parts: ``(counters, ids, ptype, P, W)``: the parts' state and work rows.
     :param model: ``(pt, mp, cfg)``: part types, contact model parameters, configuration.
-    :param drives: ``(belts, belt_v, apar, act_v, act_state, act_verts)``: belts, actuators.
+    :param drives: ``(surfaces, belt_v, apar, act_v, act_state, act_verts)``: the surfaces
+        (belts, transfer units, footprint: :func:`~conveyor_twin.micro.drive.belt_drive`),
+        belts, actuators.
     :param grid: ``(gpar, gdim, cell_table, cell_items, part_cell, cand, nbr, pos0)``: the
         broad phase's grid and neighbour list.
     :param statics: ``(static_start, static_items, shp, shp_verts)``: static shapes per cell.
@@ -115,7 +122,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
     """
     counters, ids, ptype, P, W = parts
     pt, mp, cfg = model
-    belts, belt_v, apar, act_v, act_state, act_verts = drives
+    surfaces, belt_v, apar, act_v, act_state, act_verts = drives
     gpar, gdim, cell_table, cell_items, part_cell, cand, nbr, pos0 = grid
     static_start, static_items, shp, shp_verts = statics
     va, vb, out, ct, cidx, acc, prev, island, island_sums = contacts
@@ -142,18 +149,23 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
     passes = int(cfg[CF_PASSES])
     position_passes = int(cfg[CF_POSITION_PASSES])
     skin = cfg[CF_SKIN]
+    act_load = act_v[AV_LOAD]
+    n_static = shp.shape[0]
+    inv_dt = 1.0 / dt
     for _ in range(nsteps):
         step = counters[C_STEP] + 1
         # 1. actuation
         ramp(belt_v[BV_SPEED], belt_v[BV_TARGET], belt_v[BV_LIMIT])
         for a in range(na):
             act_v[AV_PREVIOUS, a] = act_v[AV_POSITION, a]
+            act_v[AV_LOAD, a] = 0.0
         ramp(act_v[AV_POSITION], act_v[AV_TARGET], act_v[AV_LIMIT])
         for a in range(na):
             act_v[AV_RATE, a] = (act_v[AV_POSITION, a] - act_v[AV_PREVIOUS, a]) / dt
         # 2. sources, against the actuators where they start the step
         actuator_shapes(apar, act_v[AV_PREVIOUS], act_v[AV_RATE], act_state, act_verts)
-        run_sources((step - 1) * dt, sources, belts, belt_v[BV_SPEED], cfg[CF_FLOOR_MU], micro)
+        run_sources((step - 1) * dt, sources, surfaces, belt_v[BV_SPEED], cfg[CF_FLOOR_MU],
+                    micro)
         n = counters[C_N]
         # 3. pose at the step's start
         for i in range(n):
@@ -178,20 +190,22 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                     t = ptype[i]
                     ke[i] = 0.5 * ((vx[i] * vx[i] + vy[i] * vy[i]) / pt[t, PT_INV_MASS]
                                    + wz[i] * wz[i] / pt[t, PT_INV_INERTIA])
-            belt_drive(n, ptype, x, y, vx, vy, wz, pt, belts, belt_v[BV_SPEED], mp, acc, heat)
+            belt_drive(n, ptype, x, y, vx, vy, wz, pt, surfaces, belt_v[BV_SPEED], mp, acc, heat)
             if mode == MODE_PENALTY:
                 for i in range(n):
                     fx[i] = 0.0
                     fy[i] = 0.0
                     tz[i] = 0.0
             if update_pairs(n, ids, ptype, x, y, pt, gpar, gdim, cell_table, cell_items,
-                            part_cell, cand, nbr, pos0, skin) == 2:
+                            part_cell, cand, nbr, pos0, (skin, mp[MP_SPEC_MAX])) == 2:
                 counters[C_CONTACTS_FULL] += 1
-            nc = detect(n, parts, pt, grid, statics, drives, contacts)
+            nc = detect(n, parts, pt, grid, statics, drives, contacts, mp)
             if nc == ct.shape[0]:
                 counters[C_CONTACTS_FULL] += 1
             if mode == MODE_PENALTY:
                 penalty_forces(nc, ct, cidx, ptype, vx, vy, wz, fx, fy, tz, pt, mp, acc)
+                add_actuator_load(nc, ct, cidx, n_static, (vx, vy, wz), mp, h, inv_dt, True,
+                                  act_load)
                 for i in range(n):
                     t = ptype[i]
                     vx[i] += h * fx[i] * pt[t, PT_INV_MASS]
@@ -202,8 +216,13 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                     fx[i] = vx[i]     # velocities before the impulses, for limit_energy
                     fy[i] = vy[i]
                     tz[i] = wz[i]
-                prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, fx, fy, tz, prev)
+                _found, bounces = prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz,
+                                                   fx, fy, tz, prev)
                 solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev)
+                if bounces:
+                    restitute(nc, ct, cidx, ptype, vx, vy, wz, pt, mp, island)
+                add_actuator_load(nc, ct, cidx, n_static, (vx, vy, wz), mp, h, inv_dt, False,
+                                  act_load)
                 limit_energy(n, nc, ptype, pt, (vx, vy, wz), (fx, fy, tz), heat, contacts)
             for i in range(n):
                 if impulse:

@@ -134,16 +134,21 @@ def cross(r: np.ndarray, v: np.ndarray) -> float:
 
 
 def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np.ndarray,
-               i_inv: np.ndarray, passes: int,
-               heat: Optional[np.ndarray] = None) -> List[Tuple[float, float]]:
+               i_inv: np.ndarray, passes: int, heat: Optional[np.ndarray] = None, *,
+               h: float, tolerance: float, bounce_passes: int,
+               bounce_tolerance: float) -> List[Tuple[float, float]]:
     """Apply the impulses of :func:`conveyor_twin.micro.contacts.impulses.prepare_contacts`,
-    :func:`~conveyor_twin.micro.contacts.impulses.solve_impulses` and
+    :func:`~conveyor_twin.micro.contacts.impulses.solve_impulses`,
+    :func:`~conveyor_twin.micro.contacts.restitution.restitute` and
     :func:`~conveyor_twin.micro.contacts.energy.limit_energy`; return the accumulated
-    (normal, tangential) impulse of each contact.
+    (normal, tangential) impulse of each contact kept for the next substep (before the
+    restitution sweeps, scaled by the energy limit).
 
     :param contacts: dicts with ``a``, ``b`` (-1: fixed), ``n``, ``ra``, ``rb``, ``e``,
-        ``mu_s``, ``mu_k``, ``v_t``, ``bv``, ``bw`` and the warm start ``ln``, ``lt`` (the
-        previous substep's impulses, 0 for a new contact). :param v: (n, 2) velocities, in place.
+        ``mu_s``, ``mu_k``, ``v_t``, ``bv``, ``bw``, ``depth`` (< 0: a speculative contact's
+        gap) and the warm start ``ln``, ``lt`` (the previous substep's impulses, 0 for a new
+        contact). :param h: the substep [s]; ``tolerance``, ``bounce_passes``,
+        ``bounce_tolerance``: the sweeps' stopping rules. :param v: (n, 2) velocities, in place.
     :param heat: (n,) what surface friction dissipated on each part in the substep [J] (the
         external work an island may turn into kinetic energy; zeros if None).
     """
@@ -189,27 +194,55 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
         lt = min(max(c['lt'], -c['mu_s'] * ln), c['mu_s'] * ln)
         apply(c, ln * n + lt * t)
         acc.append([ln, lt])
-    # the sweep order: the part-part contacts' two halves alternating, then the others
+    # the sweep order: the part-part contacts' two halves alternating, then the others;
+    # sweeps alternate forward and backward
     pairs = sum(1 for c in contacts if c['b'] >= 0)
     half = (pairs + 1) // 2
     order = [i for k in range(half) for i in (k, half + k) if i < pairs]
     order += list(range(pairs, len(contacts)))
-    for _ in range(passes):
-        for k in order:
-            c = contacts[k]
-            n = np.asarray(c['n'], dtype=float)
-            t = np.array([-n[1], n[0]])
-            un = relative(c) @ n
-            ln, lt = acc[k]
-            ln1 = max(ln + (min(bounce[k], abs(un)) - un) / inverse_mass(c, n), 0.0)
-            apply(c, (ln1 - ln) * n)
-            ut = relative(c) @ t
-            dt = -ut / inverse_mass(c, t)
-            limit = friction_ref(c['mu_s'], c['mu_k'], c['v_t'], abs(ut)) * ln1
-            jt = min(max(lt + dt, -limit), limit) - lt
-            jt = min(max(jt, min(0.0, 2 * dt)), max(0.0, 2 * dt))
-            apply(c, jt * t)
-            acc[k] = [ln1, lt + jt]
+
+    def sweeps(visits, limit_passes, step, tolerance):
+        for it in range(limit_passes):
+            residual = 0.0
+            for k in (visits if it % 2 == 0 else visits[::-1]):
+                residual = max(residual, step(k))
+            if residual <= tolerance:
+                break
+
+    def solve(k):
+        c = contacts[k]
+        n = np.asarray(c['n'], dtype=float)
+        t = np.array([-n[1], n[0]])
+        un = relative(c) @ n
+        ln, lt = acc[k]
+        target = min(c['depth'], 0.0) / h
+        ln1 = max(ln + (target - un) / inverse_mass(c, n), 0.0)
+        apply(c, (ln1 - ln) * n)
+        ut = relative(c) @ t
+        limit = friction_ref(c['mu_s'], c['mu_k'], c['v_t'], abs(ut)) * ln1
+        lt1 = min(max(lt - ut / inverse_mass(c, t), -limit), limit)
+        apply(c, (lt1 - lt) * t)
+        acc[k] = [ln1, lt1]
+        return (abs(ln1 - ln) + abs(lt1 - lt)) * inverse_mass(c, n)
+
+    def bounce_step(k):
+        c = contacts[k]
+        n = np.asarray(c['n'], dtype=float)
+        t = np.array([-n[1], n[0]])
+        ln, lt = acc[k]
+        ln1 = max(ln + (bounce[k] - relative(c) @ n) / inverse_mass(c, n), 0.0)
+        apply(c, (ln1 - ln) * n)
+        limit = friction_ref(c['mu_s'], c['mu_k'], c['v_t'], abs(relative(c) @ t)) * ln1
+        lt1 = min(max(lt, -limit), limit)
+        apply(c, (lt1 - lt) * t)
+        acc[k] = [ln1, lt1]
+        return (abs(ln1 - ln) + abs(lt1 - lt)) * inverse_mass(c, n)
+
+    sweeps(order, passes, solve, tolerance)
+    kept = [list(a) for a in acc]      # the next substep's warm start: before the bounce
+    bouncing = [k for k in order if bounce[k] > 0.0 and acc[k][0] > 0.0]
+    if bouncing:
+        sweeps(bouncing, bounce_passes, bounce_step, bounce_tolerance)
     # no rise of the kinetic energy of any island (parts joined by contacts) beyond the heat of
     # the surface friction and the work of moving kinematic bodies
     island = list(range(len(v)))
@@ -242,8 +275,7 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
             factor[k] = max((work - g) / q, 0.0)
     v[:] = v0 + factor[:, None] * dv
     w[:] = w0 + factor * dw
-    acc = [[factor[c['a']] * ln, factor[c['a']] * lt] for (ln, lt), c in zip(acc, contacts)]
-    return [(ln, lt) for ln, lt in acc]
+    return [(factor[c['a']] * ln, factor[c['a']] * lt) for (ln, lt), c in zip(kept, contacts)]
 
 
 def box_core(x: float, y: float, yaw: float, length: float, width: float) -> np.ndarray:

@@ -25,13 +25,17 @@ from conveyor_twin.micro.actuators import actuator_arrays, actuator_shapes, actu
 from conveyor_twin.micro.contacts import (A_BELT, A_COLUMNS, A_CONTACT_FRICTION, A_DAMPER,
                                           A_INERTIA, A_SPRING, MODE_IMPULSE, MODE_PENALTY,
                                           MP_COLUMNS, MP_CORRECTION, MP_DAMPING, MP_DT,
+                                          MP_BOUNCE_PASSES, MP_BOUNCE_TOLERANCE,
+                                          MP_SPEC_MARGIN, MP_SPEC_MAX, MP_TOLERANCE,
                                           MP_FLOOR_MU, MP_GRAVITY, MP_SLOP, MP_STIFFNESS, MP_TRACK,
                                           NB_BUILDS, grid_table, neighbour_arrays, scratch)
-from conveyor_twin.micro.drive import belt_table, BT_DV, FLOOR_FRICTION
+from conveyor_twin.micro.drive import FLOOR_FRICTION
 from conveyor_twin.micro.errors import CapacityError, SpawnBoundsError, SpawnOverlapError
+from conveyor_twin.micro.footprint import footprint_table
 from conveyor_twin.micro.geometry import (build_grid, cell_extent, obstacle_shapes,
                                           outside_extent, world_bounds)
-from conveyor_twin.micro.kernel import (AV_LIMIT, AV_POSITION, AV_PREVIOUS, AV_SUB, AV_TARGET,
+from conveyor_twin.micro.kernel import (AV_LIMIT, AV_LOAD, AV_POSITION, AV_PREVIOUS, AV_ROWS,
+                                        AV_SUB, AV_TARGET,
                                         BV_LIMIT, BV_SPEED, BV_TARGET, CF_AUTO_SUB, CF_COLUMNS,
                                         CF_DT, CF_FLOOR_MU, CF_MAX_SUB, CF_MAX_TRAVEL, CF_MODE,
                                         CF_PASSES, CF_PENALTY_DT, CF_POSITION_PASSES, CF_SKIN,
@@ -45,15 +49,26 @@ from conveyor_twin.micro.state import (C_CONTACTS_FULL, C_ENTERED, C_EVENTS,
                                        C_REGION_LEFT, C_REMOVED, C_STEP, C_SUBSTEPS,
                                        C_SUBSTEPS_CAPPED, C_VANISHED, part_table, PartState,
                                        PartsView, PT_BRAD)
+from conveyor_twin.micro.surfaces import belt_table, BT_DV, transfer_table
 
 # Events buffer entries; edges beyond it between two drains are counted as dropped.
 EVENT_CAPACITY = 4096
 # Penalty model: largest omega * dt of the stiffest contact (symplectic Euler is stable < 2).
 PENALTY_OMEGA_DT = 0.5
-# Impulse model: sweeps over the contacts per substep, warm-started from the previous substep's
-# impulses (see the docstring of contacts.impulses); further sweeps change nothing for isolated
-# impacts and matter where contacts share bodies, as in a jam.
-CONTACT_PASSES = 2
+# Impulse model: most sweeps over the contacts per substep (velocity sweeps, then as many for
+# restitution), warm-started from the previous substep's impulses; they stop earlier once no
+# contact's increment changes a relative speed by more than CONTACT_TOLERANCE [m/s] (see the
+# docstring of contacts.impulses).
+CONTACT_PASSES = 16
+CONTACT_TOLERANCE = 1e-4
+# Impulse model: the restitution sweeps (only the bouncing contacts; see contacts.restitution).
+BOUNCE_PASSES = 64
+BOUNCE_TOLERANCE = 1e-12
+# Impulse model, speculative contacts: a pair is recorded while its gap is below the distance
+# it may close in a substep plus SPECULATIVE_MARGIN, at most SPECULATIVE_MAX (fractions of the
+# smallest part radius).
+SPECULATIVE_MARGIN = 0.05
+SPECULATIVE_MAX = 0.5
 # Impulse model: sweeps of the penetration correction per substep (one keeps the benchmark jam's
 # overlaps within 0.34 mm of 10 mm discs once formed; a second costs as much as a tenth of the
 # step at N = 5000 and changes little).
@@ -148,6 +163,12 @@ class MicroSim:
         self.mp[MP_GRAVITY] = cell.settings.gravity
         self.mp[MP_FLOOR_MU] = FLOOR_FRICTION
         self.mp[MP_TRACK] = 1.0 if track_activity else 0.0
+        if not penalty:
+            self.mp[MP_SPEC_MARGIN] = SPECULATIVE_MARGIN * r_min
+            self.mp[MP_SPEC_MAX] = SPECULATIVE_MAX * r_min
+            self.mp[MP_TOLERANCE] = CONTACT_TOLERANCE
+            self.mp[MP_BOUNCE_TOLERANCE] = BOUNCE_TOLERANCE
+            self.mp[MP_BOUNCE_PASSES] = BOUNCE_PASSES
         self.cfg = np.zeros(CF_COLUMNS)
         self.cfg[CF_DT] = self.dt
         self.cfg[CF_MODE] = MODE_PENALTY if penalty else MODE_IMPULSE
@@ -168,11 +189,14 @@ class MicroSim:
         self.belt_v[BV_LIMIT] = self.belts[:, BT_DV]
         # actuators
         self.apar = actuator_table(cell.actuators)
-        self.act_v = np.zeros((6, len(cell.actuators)))
+        self.act_v = np.zeros((AV_ROWS, len(cell.actuators)))
         for row in (AV_TARGET, AV_POSITION, AV_PREVIOUS, AV_SUB):
             self.act_v[row] = [a.initial_position for a in cell.actuators]
         self.act_v[AV_LIMIT] = [a.max_speed * self.dt for a in cell.actuators]
         self.act_state, self.act_verts = actuator_arrays(len(cell.actuators))
+        # what the surface lookup reads (drive.belt_drive)
+        self.surfaces = (self.belts, transfer_table(cell.actuators), self.act_v[AV_SUB],
+                         footprint_table())
         actuator_shapes(self.apar, self.act_v[AV_POSITION], self.act_v[AV_LIMIT] * 0.0,
                         self.act_state, self.act_verts)
         # obstacles and grid
@@ -181,7 +205,8 @@ class MicroSim:
         #: (x_min, y_min, x_max, y_max) [m] where :meth:`spawn` may place parts
         self.extent = cell_extent(cell, self.shapes)
         # cells and static lists grown by the neighbour list's skin (update_pairs)
-        self.grid = build_grid(bounds, max_brad, self.cfg[CF_SKIN], self.shapes)
+        self.grid = build_grid(bounds, max_brad, self.cfg[CF_SKIN] + self.mp[MP_SPEC_MAX],
+                               self.shapes)
         cap = self.state.capacity
         self._cell_table = grid_table(self.grid.cells)
         self._cell_items = np.zeros(cap, dtype=np.int64)
@@ -219,7 +244,7 @@ class MicroSim:
         self._args = (
             (s.counters, s.ids, s.part_type, s.P, self._W),
             (self.pt, self.mp, self.cfg),
-            (self.belts, self.belt_v, self.apar, self.act_v, self.act_state, self.act_verts),
+            (self.surfaces, self.belt_v, self.apar, self.act_v, self.act_state, self.act_verts),
             (self.grid.gpar, self.grid.gdim, self._cell_table, self._cell_items,
              self._part_cell, self._cand, self._nbr, self._pos0),
             (self.grid.static_start, self.grid.static_items, self.shapes, self.shape_verts),
@@ -306,6 +331,12 @@ class MicroSim:
     def actuator_position(self) -> np.ndarray:
         """Actual position of every actuator [m or rad] (view)."""
         return self.act_v[AV_POSITION]
+
+    @property
+    def actuator_load(self) -> np.ndarray:
+        """Mean normal force the parts put on every actuator during the last step [N]
+        (view; :mod:`conveyor_twin.micro.actuator_load`)."""
+        return self.act_v[AV_LOAD]
 
     # --- parts ---
     @property
@@ -516,7 +547,7 @@ class MicroSim:
         n = s.n
         return b''.join((s.counters.tobytes(), s.ids[:n].tobytes(), s.part_type[:n].tobytes(),
                          np.ascontiguousarray(s.P[:, :n]).tobytes(), self.belt_v.tobytes(),
-                         self.act_v.tobytes(), self.blocked.tobytes(),
+                         self.act_v[:AV_LOAD].tobytes(), self.blocked.tobytes(),
                          self.edge_count.tobytes(), self.src_next.tobytes(),
                          self.src_state.tobytes(), self.rng.tobytes(),
                          self.sink_count.tobytes(), self.acc.tobytes(),

@@ -185,14 +185,15 @@ def place(t, px, py, yaw, pvx, pvy, pwz, micro):
 
 
 @njit(cache=True)
-def run_sources(time, sources, belts, belt_speed, floor_mu, micro):
+def run_sources(time, sources, surfaces, belt_speed, floor_mu, micro):
     """Let every source release the parts due by ``time`` [s] (at the start of a step).
 
     :param sources: ``(src, src_next, src_state, rng)``: the source table, each source's next
         arrival [s], its pending and spawned counts and its random stream.
-    :param belts: the belt table, ``belt_speed`` their speeds [m/s], ``floor_mu`` the floor's
-        friction: a source without a velocity gives its parts that of the surface under them
-        (:func:`~conveyor_twin.micro.drive.surface_velocity`).
+    :param surfaces: the surfaces (see :func:`~conveyor_twin.micro.drive.belt_drive`),
+        ``belt_speed`` the belts' speeds [m/s], ``floor_mu`` the floor's friction: a source
+        without a velocity gives its parts the velocity and spin of the surface under them
+        (:func:`~conveyor_twin.micro.drive.surface_velocity`; on a curve its rotation).
     :param micro: what :func:`place` takes.
     """
     src, src_next, src_state, rng = sources
@@ -223,11 +224,12 @@ def run_sources(time, sources, belts, belt_speed, floor_mu, micro):
             else:
                 yaw = src[s, SR_YAW]
             if src[s, SR_BELT_VELOCITY] != 0.0:
-                pvx, pvy, _ = surface_velocity(belts, belt_speed, px, py, floor_mu)
+                pvx, pvy, pwz, _ = surface_velocity(surfaces, belt_speed, px, py, floor_mu)
             else:
                 pvx = src[s, SR_VX]
                 pvy = src[s, SR_VY]
-            pid = place(t, px, py, yaw, pvx, pvy, 0.0, micro)
+                pwz = 0.0
+            pid = place(t, px, py, yaw, pvx, pvy, pwz, micro)
             if pid != 0:
                 src_state[s, SS_PENDING] -= 1
                 src_state[s, SS_SPAWNED] += 1

@@ -5,9 +5,11 @@ break the 1 ms step; this writes the CDR directly: the fixed geometry once, and 
 build the moving markers with one ``struct`` call per group of fields (~40 us for 1000 parts,
 during which the markers thread holds the interpreter lock the stepping thread needs). Parts
 are drawn as one SPHERE_LIST (discs, scaled to diameter x diameter x height) or CUBE_LIST
-(boxes, axis-aligned: lists carry no per-point orientation) per part type; the cell's belts,
-obstacles, light barriers (red while blocked) and actuators (at their current position) are
-drawn too.
+(boxes, axis-aligned: lists carry no per-point orientation) per part type; the cell's belts (a
+straight one a flat CUBE, a curved one its annular sector as a TRIANGLE_LIST within
+:data:`CHORD_ERROR` of the arcs), obstacles, light barriers (red while blocked) and actuators
+(at their current position; a transfer unit a box as high as its lift, dark blue from its
+engage height on, pale blue below) are drawn too.
 """
 
 import math
@@ -20,6 +22,9 @@ from conveyor_twin.cell.model import Cell
 from conveyor_twin.wire.builder import CdrBuilder, ENCAPSULATION_LE, stamp_parts, string_bytes
 
 CUBE, SPHERE, CYLINDER, LINE_STRIP, LINE_LIST, CUBE_LIST, SPHERE_LIST = 1, 2, 3, 4, 5, 6, 7
+TRIANGLE_LIST = 11
+#: Largest distance [m] between a curved belt's drawn edge and its arc.
+CHORD_ERROR = 1e-4
 _F32x4 = struct.Struct('<4f')
 _STAMP = struct.Struct('<iI')
 _IDS = struct.Struct('<iii')           # id, type, action
@@ -35,6 +40,8 @@ OBSTACLE_COLOUR = (0.7, 0.72, 0.75, 1.0)
 BEAM_FREE = (0.1, 0.9, 0.1, 1.0)
 BEAM_BLOCKED = (1.0, 0.1, 0.1, 1.0)
 ACTUATOR_COLOUR = (0.95, 0.8, 0.1, 1.0)
+TRANSFER_UP = (0.12, 0.44, 0.71, 1.0)
+TRANSFER_DOWN = (0.62, 0.79, 0.91, 1.0)
 
 
 class _Marker:
@@ -143,6 +150,29 @@ def _static_prefix(markers: Sequence[_Marker], frame_id: str) -> bytes:
     return bytes(b.buf)
 
 
+def arc_segments(radius: float, sweep: float, chord_error: float = CHORD_ERROR) -> int:
+    """Return how many chords keep an arc of ``radius`` [m] over ``sweep`` [rad] within
+    ``chord_error`` [m] of the circle."""
+    step = 2.0 * math.acos(max(-1.0, 1.0 - chord_error / radius))
+    return max(1, math.ceil(abs(sweep) / step))
+
+
+def sector_triangles(curve, z: float) -> np.ndarray:
+    """Return the (6 n, 3) vertices [m] of a curved belt's annular sector as triangles at
+    height ``z``: two per chord of the outer arc (within :data:`CHORD_ERROR`)."""
+    n = arc_segments(curve.outer_radius, curve.sweep)
+    theta = curve.start_angle + curve.sweep * np.arange(n + 1) / n
+    c, s = np.cos(theta), np.sin(theta)
+    cx, cy = curve.centre
+    inner = np.stack([cx + curve.inner_radius * c, cy + curve.inner_radius * s], 1)
+    outer = np.stack([cx + curve.outer_radius * c, cy + curve.outer_radius * s], 1)
+    quads = np.stack([inner[:-1], outer[:-1], outer[1:], inner[:-1], outer[1:], inner[1:]], 1)
+    out = np.empty((6 * n, 3))
+    out[:, :2] = quads.reshape(-1, 2)
+    out[:, 2] = z
+    return out
+
+
 def _polyline_points(points: Sequence[Tuple[float, float]], z: float) -> np.ndarray:
     return np.array([(x, y, z) for x, y in points], dtype=np.float64)
 
@@ -155,6 +185,11 @@ class CellMarkers:
         self.frame_id = cell.settings.frame_id
         static: List[_Marker] = []
         for i, belt in enumerate(cell.belts):
+            if belt.curve is not None:
+                static.append(_Marker('belts', i, TRIANGLE_LIST,
+                                      points=sector_triangles(belt.curve, -0.005),
+                                      colour=BELT_COLOUR))
+                continue
             cx = 0.5 * (belt.start[0] + belt.end[0])
             cy = 0.5 * (belt.start[1] + belt.end[1])
             static.append(_Marker('belts', i, CUBE, pose=(cx, cy, -0.005, belt.angle),
@@ -219,11 +254,14 @@ class CellMarkers:
             y = act.base[1] + position * act.axis[1]
             return _Marker('actuators', i, CUBE, pose=(x, y, 0.02, heading),
                            scale=(act.length, act.width, 0.04), colour=ACTUATOR_COLOUR)
-        if act.kind == 'stopper':
+        if act.kind in ('stopper', 'transfer'):
             height = max(position, 1e-4)
+            colour = ACTUATOR_COLOUR
+            if act.kind == 'transfer':
+                colour = TRANSFER_UP if position >= act.engage_height else TRANSFER_DOWN
             return _Marker('actuators', i, CUBE, pose=(act.base[0], act.base[1],
                                                        0.5 * height, heading),
-                           scale=(act.length, act.width, height), colour=ACTUATOR_COLOUR)
+                           scale=(act.length, act.width, height), colour=colour)
         angle = heading + position
         x = act.base[0] + 0.5 * act.length * math.cos(angle)
         y = act.base[1] + 0.5 * act.length * math.sin(angle)

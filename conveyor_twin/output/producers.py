@@ -55,7 +55,9 @@ class CoordinatorOutput:
         frame.clock = cdr.encode_clock(t)
         frame.belt_states = self._belts.encode(t, actuation.belt_target, inp.belt_speed)
         frame.actuator_states = self._actuators.encode(t, actuation.actuator_target,
-                                                       inp.actuator_position)
+                                                       inp.actuator_position,
+                                                       actuation.stall_flags,
+                                                       actuation.actuator_load)
         if self.diagnostics is not None and inp.step % DIAGNOSTICS_PERIOD_STEPS == 0:
             frame.diagnostics = self.diagnostics(t)
         else:

@@ -1,8 +1,9 @@
 """Where a link takes parts out of a cell and puts them in, and the link frame between.
 
 A link has a frame at each end: at the exit, origin at the sink's centre (or the belt's end)
-and x along the belt that carries parts there; at the entry, origin on the entry line (the
-belt's start, or the region's upstream edge) and x along the belt that carries them on. A
+and x along the belt that carries parts there (a curved belt: its tangent there); at the
+entry, origin on the entry line (the belt's start, or the region's upstream edge) and x along
+the belt that carries them on. A
 part crossing keeps its lateral offset, yaw and velocity relative to these frames; its
 longitudinal offset is replaced by the entry line (the link's delay is its travel time).
 """
@@ -30,6 +31,16 @@ def _nearest_belt(cell: Cell, x: float, y: float, at_end: bool) -> Belt:
     return min(cell.belts, key=distance)
 
 
+def heading(belt: Belt, *, at_end: bool) -> float:
+    """Return the running direction [rad] of a belt at its end (or start): a straight belt's
+    angle, a curved belt's tangent there (its angle plus or minus 90 degrees)."""
+    if belt.curve is None:
+        return belt.angle
+    curve = belt.curve
+    angle = curve.start_angle + curve.sweep if at_end else curve.start_angle
+    return _wrap(angle + math.copysign(0.5 * math.pi, curve.sweep))
+
+
 def end_rect(f: EndFrame) -> Rect:
     """Return the axis-aligned bounding rectangle of a link end's rectangle [m]."""
     c, s = math.cos(f.yaw), math.sin(f.yaw)
@@ -51,9 +62,10 @@ def end_frame(cell: Cell, end: LinkEnd, *, exit_side: bool) -> EndFrame:
         half = 0.5 * belt.width
         if exit_side:
             ex, ey = belt.end
-            return EndFrame(ex, ey, belt.angle, 0.0, BELT_EXIT_DEPTH, half)
+            return EndFrame(ex, ey, heading(belt, at_end=True), 0.0, BELT_EXIT_DEPTH, half)
         sx, sy = belt.start
-        return EndFrame(sx, sy, belt.angle, 0.0, min(BELT_EXIT_DEPTH, belt.length), half)
+        return EndFrame(sx, sy, heading(belt, at_end=False), 0.0,
+                        min(BELT_EXIT_DEPTH, belt.length), half)
     return _rect_frame(cell, end.region, at_end=False)
 
 
@@ -63,7 +75,7 @@ def _rect_frame(cell: Cell, rect: Rect, *, at_end: bool) -> EndFrame:
     x0, y0, x1, y1 = rect
     cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
     belt = _nearest_belt(cell, cx, cy, at_end)
-    quarter = round(belt.angle / (0.5 * math.pi)) % 4
+    quarter = round(heading(belt, at_end=at_end) / (0.5 * math.pi)) % 4
     yaw = quarter * 0.5 * math.pi
     hx, hy = 0.5 * (x1 - x0), 0.5 * (y1 - y0)
     along, across = (hx, hy) if quarter % 2 == 0 else (hy, hx)

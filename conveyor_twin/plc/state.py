@@ -159,8 +159,8 @@ class PlcState:
                 self._edge_blocked[i] = edge.blocked
 
     def _decode(self, latest: Tuple[Any, ...]) -> Tuple[Any, ...]:
-        """Return (blocked, belt setpoints, belt actual, actuator targets, positions) of the
-        latest frame (decoded once per frame)."""
+        """Return (blocked, belt setpoints, belt actual, actuator targets, positions, stalls,
+        loads) of the latest frame (decoded once per frame)."""
         if self._decoded[0] is latest:
             return self._decoded[1]
         cell = self.cell
@@ -182,11 +182,15 @@ class PlcState:
             states = decode_actuator_states(actuators)
             target = tuple(float(v) for v in states.commanded)
             position = tuple(float(v) for v in states.actual)
+            stalled = tuple(bool(v) for v in states.stalled)
+            load = tuple(float(v) for v in states.load)
         else:
             target = tuple(a.initial_position for a in cell.actuators)
             position = tuple(float(v) for v in inp.actuator_position) if inp is not None \
                 else target
-        out = (blocked, setpoint, actual, target, position)
+            stalled = tuple(False for _ in cell.actuators)
+            load = tuple(0.0 for _ in cell.actuators)
+        out = (blocked, setpoint, actual, target, position, stalled, load)
         self._decoded = (latest, out)
         return out
 
@@ -203,7 +207,7 @@ class PlcState:
     def _view(self, latest: Tuple[Any, ...], decoded: Tuple[Any, ...],
               faults: Tuple[int, str], lockstep: Dict[str, Any]) -> PlcView:
         step, time_ns = latest[1], latest[2]
-        blocked, setpoint, actual, target, position = decoded
+        blocked, setpoint, actual, target, position, stalled, load = decoded
         ledger = ledger_values(self.counters() if self.counters is not None else {})
         twin = {'time': time_ns * 1e-9, 'step': step, 'mode': self.mode,
                 'faults_active': faults[0], 'active_faults': faults[1],
@@ -211,7 +215,8 @@ class PlcState:
         per_barrier = {'blocked': blocked, 'rising': self._rising, 'falling': self._falling}
         edge_times = {'last_rising': self._last_rising, 'last_falling': self._last_falling}
         per_belt = {'setpoint': setpoint, 'actual': actual}
-        per_actuator = {'target': target, 'position': position}
+        per_actuator = {'target': target, 'position': position, 'stalled': stalled,
+                        'load': load}
         values: List[Value] = []
         edges: Dict[str, Optional[int]] = {}
         for tag in self.tags:

@@ -15,7 +15,8 @@ address and the twin's and lockstep's addresses are the same for every cell:
 - discrete inputs: ``Lockstep/Done`` (0), then ``Barriers/<b>/Blocked`` (1, 2, ...);
 - input registers: the twin's 32-bit values (0..13), ``Mode`` (14), ``Lockstep/DoneTick`` (15),
   then per barrier ``RisingEdges``, ``FallingEdges``, ``LastRisingTime``, ``LastFallingTime``
-  (8 registers), per belt ``ActualSpeed`` (2), per actuator ``Position`` (2);
+  (8 registers), per belt ``ActualSpeed`` (2), per actuator ``Position`` (2), then per actuator
+  ``Load`` (2) (and the discrete inputs end with every actuator's ``Stalled``);
 - holding registers: ``Lockstep/Tick`` (0), ``Lockstep/TickSteps`` (1), then per belt
   ``SpeedSetpoint`` (2), per actuator ``Target`` (2);
 - coils: none.
@@ -286,6 +287,15 @@ def tag_map(cell: Cell) -> TagMap:
               target=t)
         b.add(p + 'Position', k.FLOAT64, unit, f'position of {actuator.kind} {t!r}',
               ('actuator', i, 'position'), table='input', mtype='float32', target=t)
+    # after the positions, so the addresses above stay those of cells before stalls existed
+    for i, (actuator, name) in enumerate(zip(cell.actuators,
+                                             browse_names(a.name for a in cell.actuators))):
+        p, t = f'Actuators/{name}/', actuator.name
+        b.add(p + 'Stalled', k.BOOL, '', f'{actuator.kind} {t!r} is stalled (load over its '
+              'force_limit)', ('actuator', i, 'stalled'), table='discrete', mtype='bit',
+              target=t)
+        b.add(p + 'Load', k.FLOAT64, 'N', f'force of the parts on {actuator.kind} {t!r}',
+              ('actuator', i, 'load'), table='input', mtype='float32', target=t)
     return TagMap(b.tags)
 
 

@@ -148,7 +148,9 @@ class CoordinatorNode(Node):
             WARN if self.runner.overruns else OK, 'conveyor_twin: scale_coordinator',
             f'{self.runner.overruns} overruns' if self.runner.overruns else 'running in time',
             self.twin.cell.settings.name, list(values.items()))
-        return [status, self._fault_status(), self._health_status()]
+        actuators = self.twin.actuation.status()
+        return [status, self._fault_status(), self._health_status()] + (
+            [actuators] if actuators is not None else [])
 
     def _fault_status(self) -> DiagnosticStatus:
         """The faults' status: WARN naming every active fault, OK with none."""

@@ -15,7 +15,9 @@ Coordinator -> scale nodes (first byte: the kind):
 
 Scale nodes -> coordinator: ``D`` done, :func:`done` (uint8 role: a
 :class:`~conveyor_twin.coord.layout.Role`, uint64 step, reply bytes). The
-reply of a step carries the node's counters (:func:`encode_counters`) on diagnostics steps only;
+reply of a step carries the node's counters (:func:`encode_counters`) on diagnostics steps only
+(the micro node's reply starts with the step's actuator loads, :func:`with_loads`, when the
+cell has actuators);
 the reply of a spawn is :func:`spawn_reply` / :func:`spawn_error` from the micro node.
 
 Micro node <-> macro node (cells with ``macro``/``auto`` zones), each :func:`stamped` with the
@@ -32,7 +34,7 @@ time [s])`` per edge of the step).
 
 import json
 import struct
-from typing import Dict, List, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -209,6 +211,22 @@ def split_step_reply(reply: bytes) -> Tuple[bytes, bytes]:
         return reply, b''
     n, = _U32.unpack_from(reply, 2)
     return reply[6 + n:], reply[6:6 + n]
+
+
+_LOADS = b'\x00L'  # never the start of counters (JSON) or measures
+
+
+def with_loads(loads: np.ndarray, reply: bytes) -> bytes:
+    """Return the micro node's step ``reply`` preceded by the step's actuator loads [N]."""
+    return _LOADS + _U32.pack(loads.size) + np.asarray(loads, '<f8').tobytes() + reply
+
+
+def split_loads(reply: bytes) -> Tuple[bytes, Optional[np.ndarray]]:
+    """Return (the rest, the actuator loads [N] or None) of a :func:`with_loads` reply."""
+    if reply[:2] != _LOADS:
+        return reply, None
+    n, = _U32.unpack_from(reply, 2)
+    return reply[6 + 8 * n:], np.frombuffer(reply, '<f8', n, 6).astype(np.float64)
 
 
 def encode_measures(edge_count: np.ndarray, zone_parts: np.ndarray) -> bytes:

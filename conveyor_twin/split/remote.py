@@ -81,6 +81,7 @@ class RemoteStage:
         self._step_replies: Dict[int, bytes] = {}  # role -> counters (reply bytes)
         self._replies_fresh = False  # _step_replies hold counters of the current state
         self._done_cv = threading.Condition()
+        self._loads: Optional[np.ndarray] = None
         self._ready = False
         #: Where a warning goes (the coordinator node passes its logger's).
         self.warn: Callable[[str], None] = _print_warning
@@ -91,6 +92,9 @@ class RemoteStage:
         with self._lock:
             replies = self._send_and_wait(protocol.step_payload(inp), inp.step)
             self._step = inp.step
+            if Role.MICRO in replies:  # the actuator loads first
+                replies[Role.MICRO], loads = protocol.split_loads(replies[Role.MICRO])
+                self._loads = loads
             if self.measures_wanted:  # a scenario's triggers: the scale nodes' measures first
                 for role, reply in replies.items():
                     replies[role], self._measures[role] = protocol.split_step_reply(reply)
@@ -98,6 +102,11 @@ class RemoteStage:
             self._replies_fresh = all(replies.get(r) for r in self.roles)
             if self._replies_fresh:
                 self._step_replies = replies
+
+    def actuator_load(self) -> Optional[np.ndarray]:
+        """The load [N] on every actuator in the last step, as the micro process measured it
+        (None before a step or without actuators)."""
+        return self._loads
 
     def reset(self, cell: Cell, seed: int) -> None:
         """Restart both scale processes with ``seed`` and ``cell`` (the current one, or the

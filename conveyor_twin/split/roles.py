@@ -44,7 +44,8 @@ class CoordinatorRole:
                  pids: Optional[Dict[Role, int]] = None) -> None:
         self.cell, self.seed = cell, seed
         self.remote = RemoteStage(cell, transport, pids=pids)
-        self.twin = Twin(cell, seed=seed, stages=[self.remote])
+        self.twin = Twin(cell, seed=seed, stages=[self.remote],
+                         actuator_load=self.remote.actuator_load)
 
     def spawn(self, request: SpawnRequest) -> np.ndarray:
         """Place a checked spawn request's parts now (all or nothing); return their ids.
@@ -103,6 +104,10 @@ class MicroRole(ScaleRole):
         self._pending = None
         self.side.apply(body)
         self.finish_step(inp)
+
+    def actuator_loads(self) -> Optional[np.ndarray]:
+        """The step's load on every actuator [N] (None without actuators)."""
+        return self.stage.actuator_load() if self.stage.cell.actuators else None
 
     def spawn_reply(self, body: bytes) -> bytes:
         """Place parts for a spawn request: ``E`` + message, or ``I`` + ids."""

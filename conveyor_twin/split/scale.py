@@ -12,6 +12,8 @@ The bytes go through a :class:`ScaleLink` of the ROS side (``conveyor_twin.ros.s
 
 from typing import Callable, Dict, Optional, Protocol
 
+import numpy as np
+
 from conveyor_twin.cell import load_cell
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.contract import DIAGNOSTICS_PERIOD_STEPS
@@ -105,6 +107,9 @@ class ScaleRole:
         reply = self._counters() if inp.step % DIAGNOSTICS_PERIOD_STEPS == 0 else b''
         if self.measure is not None:
             reply = protocol.step_reply(reply, self.measure())
+        loads = self.actuator_loads()
+        if loads is not None:
+            reply = protocol.with_loads(loads, reply)
         self._report(inp.step, reply)
 
     def reset(self, cell: Cell, seed: int) -> None:
@@ -121,6 +126,11 @@ class ScaleRole:
         self.link.send_done(protocol.to_cdr(protocol.done(self.role, step, reply)))
 
     # -- what each role adds -------------------------------------------------------------
+    def actuator_loads(self) -> Optional[np.ndarray]:
+        """The step's load on every actuator [N] for the coordinator's stalls (None: not
+        measured here)."""
+        return None
+
     def counters(self) -> Dict[str, float]:
         """Part balance of the stage."""
         return self.stage.counters()

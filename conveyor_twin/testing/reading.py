@@ -72,8 +72,8 @@ class StreamReader(TwinLifecycle):
         if not data:
             return {}
         msg = deserialize_message(data[-1], ActuatorStates)
-        return {n: ActuatorState(c, p) for n, c, p in
-                zip(msg.name, msg.commanded_position, msg.position)}
+        return {n: ActuatorState(c, p, bool(s), float(f)) for n, c, p, s, f in
+                zip(msg.name, msg.commanded_position, msg.position, msg.stalled, msg.load)}
 
     def actuator(self, name: str) -> ActuatorState:
         """Latest state of one actuator; raise KeyError naming the known actuators."""

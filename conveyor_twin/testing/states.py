@@ -13,10 +13,13 @@ class BeltState(NamedTuple):
 
 
 class ActuatorState(NamedTuple):
-    """An actuator as ``actuator_states`` last reported it: positions [m] or [rad]."""
+    """An actuator as ``actuator_states`` last reported it: positions [m] or [rad], whether it
+    is stalled and the parts' load on it [N]."""
 
     commanded_position: float
     position: float
+    stalled: bool = False
+    load: float = 0.0
 
 
 class BeltSample(NamedTuple):

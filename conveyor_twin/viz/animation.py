@@ -2,9 +2,10 @@
 
 Top: the cell to scale (when the recording carries its cell) with the parts at their poses and
 sizes, the macro density as a heat map, light barriers coloured by state and actuators at their
-position. Bottom: light-barrier states and belt speeds against simulation time, with a cursor
-at the frame's time. The file is written to a temporary name beside the output and moved into
-place when complete, so a failure leaves an existing output untouched.
+position (a transfer unit coloured up or down). Bottom: light-barrier states and belt speeds
+against simulation time, with a cursor at the frame's time. The file is written to a temporary
+name beside the output and moved into place when complete, so a failure leaves an existing
+output untouched.
 """
 
 import math
@@ -290,6 +291,8 @@ class _Scene:
             for patch, act, position in zip(self.actuator_patches, self.data.cell.actuators,
                                             frame.actuator_position):
                 patch.set_xy(cell_drawing.actuator_outline(act, float(position)))
+                if act.kind == 'transfer':   # up (carrying) or down, per frame
+                    patch.set_facecolor(cell_drawing.actuator_face(act, float(position)))
         for cursor in self.cursors:
             cursor.set_xdata([frame.t, frame.t])
         text = f'{self.name}: t = {frame.t:6.2f} s, {shown} parts (micro)'

@@ -1,22 +1,29 @@
 """Draw a cell's layout to scale on matplotlib axes, every element named.
 
-Belts are grey surfaces with an arrow along their running direction; walls and deflectors are
-drawn at their real thickness, pegs and polygons as their outline; actuators at their initial
-position with their stroke (the swept area, dashed); light barriers as beams; sources, sinks
-and zones as labelled regions (a zone's label gives its scale policy). Units: m, frame of the
-cell (x along the main conveying direction, y to the left).
+Belts are grey surfaces with an arrow along their running direction (a curved belt: its
+annular sector, the arrow bent along its centre line); walls and deflectors (and a curve's
+guide rails) are drawn at their real thickness, pegs and polygons as their outline; actuators
+at their initial position with their stroke (the swept area, dashed), transfer units as their
+roller footprint, coloured up or down; light barriers as beams; sources, sinks and zones as
+labelled regions (a zone's label gives its scale policy). Units: m, frame of the cell (x along
+the main conveying direction, y to the left).
 """
 
 import math
 from typing import List, Sequence, Tuple
 
-from conveyor_twin.cell.model import Actuator, Cell, Obstacle
+from conveyor_twin.cell.model import Actuator, Belt, Cell, Obstacle
 from conveyor_twin.viz.label_placement import add_label, place_labels
 
 BELT_FACE = '#d9d9d9'
 BELT_EDGE = '#6e6e6e'
 OBSTACLE_FACE = '#4a5a6a'
 ACTUATOR_FACE = '#e8b400'
+#: Transfer unit lowered (the belt carries) and raised to its engage height (it carries).
+TRANSFER_DOWN = '#9ec9e8'
+TRANSFER_UP = '#1f6fb4'
+#: Largest distance [m] between a drawn curve and the true arc.
+CHORD_ERROR = 1e-4
 BEAM_FREE = '#1a9e1a'
 BEAM_BLOCKED = '#e0201a'
 SOURCE_COLOUR = '#2a7fd4'
@@ -73,6 +80,9 @@ def draw_static(ax, cell: Cell, *, labels: bool = True) -> None:
     from matplotlib.patches import Circle, FancyArrow, Polygon, Rectangle
 
     for belt in cell.belts:
+        if belt.curve is not None:
+            _draw_curved_belt(ax, belt, labels, Polygon)
+            continue
         ax.add_patch(Polygon(belt.corners(), closed=True, fc=BELT_FACE, ec=BELT_EDGE, lw=0.8,
                              zorder=0))
         dx, dy = belt.direction
@@ -119,6 +129,45 @@ def draw_static(ax, cell: Cell, *, labels: bool = True) -> None:
             _label(ax, x, y, obstacle.name, OBSTACLE_FACE, dy=1.0 if y >= mid_y else -1.0)
 
 
+def _draw_curved_belt(ax, belt: Belt, labels: bool, Polygon) -> None:
+    """Draw a curved belt: its annular sector and the arrow along its centre line."""
+    ax.add_patch(Polygon(belt.outline(CHORD_ERROR), closed=True, fc=BELT_FACE, ec=BELT_EDGE,
+                         lw=0.8, zorder=0))
+    arrow, (x, y) = curve_arrow(belt)
+    ax.add_patch(Polygon(arrow, closed=True, fc=BELT_EDGE, ec='none', alpha=0.6, zorder=1))
+    if labels:
+        _label(ax, x, y, f'belt {belt.name} ({belt.speed:g} m/s)', '#333333', dy=-1.0)
+
+
+def curve_arrow(belt: Belt) -> Tuple[List[Tuple[float, float]], Tuple[float, float]]:
+    """Return a curved belt's running-direction arrow and the point its label names [m].
+
+    The arrow is a band along the centre line (from 12 % of the length, as long as a
+    straight belt's arrow: at most a quarter of the length or three widths) ending in a head
+    whose tip lies on the centre line; drawn within :data:`CHORD_ERROR` of the arcs.
+    """
+    curve = belt.curve
+    r, w = curve.centre_radius, belt.width
+    sign = 1.0 if curve.sweep > 0 else -1.0
+    arrow = min(0.25 * belt.length, 3 * w)
+    head = min(0.25 * w, 0.5 * arrow)
+    s0 = 0.12 * belt.length
+    s1, tip = s0 + arrow - head, s0 + arrow
+    shaft, spread = 0.06 * w, 0.15 * w
+    cx, cy = curve.centre
+
+    def at(s: float, offset: float) -> Tuple[float, float]:
+        theta = curve.start_angle + sign * s / r
+        return cx + (r + offset) * math.cos(theta), cy + (r + offset) * math.sin(theta)
+
+    step = 2.0 * math.acos(max(-1.0, 1.0 - CHORD_ERROR / (r + shaft)))
+    n = max(2, math.ceil((s1 - s0) / r / step))
+    along = [s0 + (s1 - s0) * k / n for k in range(n + 1)]
+    points = ([at(s, shaft) for s in along] + [at(s1, spread), at(tip, 0.0), at(s1, -spread)]
+              + [at(s, -shaft) for s in reversed(along)])
+    return points, at(s0 + 0.5 * arrow, 0.0)
+
+
 def _obstacle_patches(obstacle: Obstacle, Circle, Polygon) -> list:
     style = dict(fc=OBSTACLE_FACE, ec=OBSTACLE_FACE, lw=0.5, zorder=4)
     if obstacle.kind == 'peg':
@@ -131,9 +180,47 @@ def _obstacle_patches(obstacle: Obstacle, Circle, Polygon) -> list:
 
 
 def _obstacle_anchor(obstacle: Obstacle) -> Tuple[float, float]:
+    """The point an obstacle's label names: the middle of a polyline of more than two points
+    (along its length: on a curve's guide rail), else the mean of its points."""
+    if obstacle.kind in ('wall', 'deflector') and len(obstacle.points) > 2:
+        return _polyline_middle(obstacle.points)
     xs = [p[0] for p in obstacle.points]
     ys = [p[1] for p in obstacle.points]
     return sum(xs) / len(xs), sum(ys) / len(ys)
+
+
+def _polyline_middle(points: Sequence[Tuple[float, float]]) -> Tuple[float, float]:
+    """Return the point halfway along a polyline [m]."""
+    lengths = [math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(points[:-1], points[1:])]
+    left = 0.5 * sum(lengths)
+    for (a, b), length in zip(zip(points[:-1], points[1:]), lengths):
+        if left <= length and length > 0.0:
+            f = left / length
+            return a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])
+        left -= length
+    return points[-1]
+
+
+def actuator_face(act: Actuator, position: float) -> str:
+    """Return the face colour of an actuator at ``position``: a transfer unit's shows whether
+    it is raised to its engage height (it carries the parts) or not."""
+    if act.kind == 'transfer':
+        return TRANSFER_UP if position >= act.engage_height else TRANSFER_DOWN
+    return ACTUATOR_FACE
+
+
+def _transfer_arrow(ax, act: Actuator, FancyArrow) -> None:
+    """Draw the carrying direction of a transfer unit's rollers inside its footprint."""
+    if act.surface_speed == 0.0:
+        return
+    sign = 1.0 if act.surface_speed > 0 else -1.0
+    dx, dy = sign * act.axis[0], sign * act.axis[1]
+    half = 0.3 * act.length
+    ax.add_patch(FancyArrow(act.base[0] - half * dx, act.base[1] - half * dy, 2 * half * dx,
+                            2 * half * dy, width=0.08 * act.width, head_width=0.3 * act.width,
+                            head_length=min(0.2 * act.length, 0.3 * act.width),
+                            length_includes_head=True, fc='#0b2f55', ec='none', alpha=0.7,
+                            zorder=6))
 
 
 def draw_actuators(ax, cell: Cell, positions: Sequence[float], *, stroke: bool = True,
@@ -142,7 +229,7 @@ def draw_actuators(ax, cell: Cell, positions: Sequence[float], *, stroke: bool =
 
     :return: the actuator patches (in cell order), for animation.
     """
-    from matplotlib.patches import Polygon
+    from matplotlib.patches import FancyArrow, Polygon
 
     patches = []
     for act, position in zip(cell.actuators, positions):
@@ -156,17 +243,27 @@ def draw_actuators(ax, cell: Cell, positions: Sequence[float], *, stroke: bool =
                 for end in (low, high):
                     ax.add_patch(Polygon(actuator_outline(act, end), closed=True, fill=False,
                                          ec=ACTUATOR_FACE, lw=0.9, ls='--', zorder=3))
-        patch = Polygon(actuator_outline(act, position), closed=True, fc=ACTUATOR_FACE,
-                        ec='#8a6a00', lw=0.6, zorder=5,
-                        hatch='....' if act.kind == 'stopper' else None)
+        if act.kind == 'transfer':   # rollers across the carrying axis
+            hatch = '||' if abs(act.axis[0]) >= abs(act.axis[1]) else '--'
+            patch = Polygon(actuator_outline(act, position), closed=True,
+                            fc=actuator_face(act, position), ec='#0b2f55', lw=0.6, zorder=5,
+                            hatch=hatch)
+        else:
+            patch = Polygon(actuator_outline(act, position), closed=True, fc=ACTUATOR_FACE,
+                            ec='#8a6a00', lw=0.6, zorder=5,
+                            hatch='....' if act.kind == 'stopper' else None)
         ax.add_patch(patch)
         patches.append(patch)
+        if act.kind == 'transfer':
+            _transfer_arrow(ax, act, FancyArrow)
         if labels:
             unit = 'rad' if act.is_rotary else 'm'
-            what = 'lift' if act.kind == 'stopper' else 'stroke'
+            what = 'lift' if act.kind in ('stopper', 'transfer') else 'stroke'
             name = act.name if act.name == act.kind else f'{act.name} ({act.kind})'
-            _label(ax, act.base[0], act.base[1], f'{name}: {what} {low:g}..{high:g} {unit}',
-                   '#8a6a00', dy=1.0)
+            text = f'{name}: {what} {low:g}..{high:g} {unit}'
+            if act.kind == 'transfer':
+                text += f', rollers {act.surface_speed:g} m/s'
+            _label(ax, act.base[0], act.base[1], text, '#8a6a00', dy=1.0)
     return patches
 
 
@@ -211,6 +308,11 @@ def view_limits(cell: Cell, margin: float = 0.08) -> Tuple[float, float, float, 
     xs: List[float] = []
     ys: List[float] = []
     for belt in cell.belts:
+        if belt.curve is not None:
+            x0, y0, x1, y1 = belt.bounding_box()
+            xs += [x0, x1]
+            ys += [y0, y1]
+            continue
         for x, y in belt.corners():
             xs.append(x)
             ys.append(y)

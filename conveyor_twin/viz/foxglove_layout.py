@@ -12,7 +12,7 @@ import json
 import re
 from typing import Dict, List, Set
 
-from conveyor_twin.cell.model import Cell
+from conveyor_twin.cell.model import Belt, Cell
 from conveyor_twin.contract import BELT_COMMAND, BELT_STATES, DIAGNOSTICS, LIGHT_BARRIERS
 from conveyor_twin.record import topics as contract
 from conveyor_twin.viz.foxglove_view import DENSITY_GRID_TOPIC, SCENE_TOPIC, density_zones
@@ -78,9 +78,17 @@ def _layout(config: dict, bottom: List[str]) -> dict:
                        'splitPercentage': 62}}
 
 
+def belt_x_max(belt: Belt) -> float:
+    """Return the largest x [m] the camera should show of a belt: its end points' for a
+    straight belt, its sector's for a curved one."""
+    if belt.curve is None:
+        return max(belt.start[0], belt.end[0])
+    return max(x for x, _ in belt.outline())
+
+
 def cell_layout(cell: Cell, namespace: str = '') -> dict:
     """Return the Foxglove layout (a JSON object) of the view of ``cell`` under ``namespace``."""
-    extent = max((max(b.start[0], b.end[0]) for b in cell.belts), default=6.0)
+    extent = max((belt_x_max(b) for b in cell.belts), default=6.0)
     config = {
         '3D!scene': _scene_panel(_scene_topics(cell, namespace), cell.settings.frame_id,
                                  0.5 * extent),
@@ -110,8 +118,8 @@ def plant_layout(plant) -> dict:
         topics.update(_scene_topics(c.cell, ns))
         belts += _belt_paths(c.cell, ns, f'{c.name}: ')
         barriers += _barrier_paths(c.cell, ns, f'{c.name}: ')
-        extent = max(extent, c.placement.x + max((max(b.start[0], b.end[0])
-                                                  for b in c.cell.belts), default=0.0))
+        extent = max(extent, c.placement.x + max((belt_x_max(b) for b in c.cell.belts),
+                                                 default=0.0))
     config = {
         '3D!scene': _scene_panel(topics, plant_frame(plant), 0.5 * extent),
         'Plot!belts': {'title': 'belt speeds [m/s]', 'paths': belts, 'showLegend': True},

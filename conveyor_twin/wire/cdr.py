@@ -9,7 +9,8 @@ numpy arrays and named tuples), :mod:`.fault_state` and :mod:`.diagnostics` (the
 
 from conveyor_twin.wire.builder import (CdrError, ENCAPSULATION_LE, NS_PER_S, stamp_of,
                                         stamp_parts)
-from conveyor_twin.wire.decoders import (decode_actuator_command, decode_actuator_states,
+from conveyor_twin.wire.decoders import (ActuatorStatesData, decode_actuator_command,
+                                         decode_actuator_states,
                                          decode_belt_command, decode_belt_states, decode_clock,
                                          decode_command_origin, decode_density_grid,
                                          decode_diagnostic_array, decode_fault_state,
@@ -28,7 +29,7 @@ from conveyor_twin.wire.encoders import (ActuatorStatesEncoder, BeltStatesEncode
                                          LightBarrierStatesEncoder, PartStatesEncoder)
 
 __all__ = [
-    'ActuatorStatesEncoder', 'BeltStatesEncoder', 'CdrError', 'decode_actuator_command',
+    'ActuatorStatesData', 'ActuatorStatesEncoder', 'BeltStatesEncoder', 'CdrError', 'decode_actuator_command',
     'decode_actuator_states', 'decode_belt_command', 'decode_belt_states', 'decode_clock',
     'decode_command_origin', 'decode_density_grid', 'decode_diagnostic_array',
     'decode_fault_state', 'decode_light_barrier_edge', 'decode_light_barrier_states',

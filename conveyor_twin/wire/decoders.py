@@ -206,12 +206,41 @@ def decode_belt_states(data: bytes) -> NamedPairData:
     return _named_pair(data, 'BeltStates')
 
 
-def decode_actuator_states(data: bytes) -> NamedPairData:
-    """Decode an ActuatorStates message: commanded and actual position [m or rad].
+class ActuatorStatesData(NamedTuple):
+    """Decoded ActuatorStates; arrays indexed like ``names``: positions [m or rad], ``stalled``
+    (bool), ``load`` [N]."""
+
+    stamp_ns: int
+    frame_id: str
+    names: Tuple[str, ...]
+    commanded: np.ndarray
+    actual: np.ndarray
+    stalled: np.ndarray
+    load: np.ndarray
+
+
+def decode_actuator_states(data: bytes) -> ActuatorStatesData:
+    """Decode an ActuatorStates message: commanded and actual position [m or rad], stall
+    flags and loads [N] (a message of the earlier layout, without them: none stalled, zero).
 
     :raises CdrError: on malformed data.
     """
-    return _named_pair(data, 'ActuatorStates')
+    r = CdrReader(data, 'ActuatorStates')
+    stamp_ns = r.stamp_ns()
+    frame_id = r.string()
+    names = tuple(r.string() for _ in range(r.scalar('I')))
+    commanded = r.array('f8')
+    actual = r.array('f8')
+    if r.at_end():  # recorded before the stall fields existed
+        stalled, load = np.zeros(len(names), bool), np.zeros(len(names))
+    else:
+        stalled = r.array('u1').astype(bool)
+        load = r.array('f8')
+    if not len(names) == len(commanded) == len(actual) == len(stalled) == len(load):
+        msg = (f'ActuatorStates: {len(names)} names, {len(commanded)} commanded, '
+               f'{len(actual)} actual, {len(stalled)} stalled and {len(load)} load values')
+        raise CdrError(msg)
+    return ActuatorStatesData(stamp_ns, frame_id, names, commanded, actual, stalled, load)
 
 
 class EdgeData(NamedTuple):

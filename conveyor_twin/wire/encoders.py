@@ -229,6 +229,7 @@ class _NamedPairEncoder:
         self._size = b.pos
         self._buf = CdrBuffer(self._size)
         self._buf.put(0, bytes(b.buf))
+        self._v_a_pos, self._v_b_pos = views
         self._v_a = self._buf.view(views[0], n, '<f8')
         self._v_b = self._buf.view(views[1], n, '<f8')
 
@@ -255,7 +256,52 @@ class BeltStatesEncoder(_NamedPairEncoder):
 
 
 class ActuatorStatesEncoder(_NamedPairEncoder):
-    """Encoder of ``conveyor_twin_msgs/ActuatorStates``: positions [m or rad] of fixed names."""
+    """Encoder of ``conveyor_twin_msgs/ActuatorStates``: positions [m or rad], stall flags and
+    loads [N] of fixed names."""
+
+    def __init__(self, frame_id: str, names: Sequence[str]) -> None:
+        super().__init__(frame_id, names)
+        n = self.count
+        b = CdrBuilder()
+        b.buf.extend(self._buf.raw[8:8 + self._size].tobytes())  # the pair layout, then more
+        b.u32(n)
+        p_stalled = b.pos
+        b.buf.extend(bytes(n))
+        b.u32(n)
+        if n:
+            b.align(8)
+        p_load = b.pos
+        b.buf.extend(bytes(8 * n))
+        self._size = b.pos
+        self._buf = CdrBuffer(self._size)
+        self._buf.put(0, bytes(b.buf))
+        self._v_a = self._buf.view(self._v_a_pos, n, '<f8')
+        self._v_b = self._buf.view(self._v_b_pos, n, '<f8')
+        self._v_stalled = self._buf.view(p_stalled, n, np.uint8)
+        self._v_load = self._buf.view(p_load, n, '<f8')
+
+    def encode(self, stamp_ns: int, commanded: Any, actual: Any, stalled: Any = None,
+               load: Any = None) -> bytes:
+        """Return the CDR bytes of one message.
+
+        :param commanded: last accepted target positions; ``actual``: actual positions
+            [m or rad]; ``stalled``: true while stalled (None: none); ``load``: normal force of
+            the parts on each actuator in the step [N] (None: zeros); one per name.
+        :raises CdrError: on arrays whose length differs from the names.
+        """
+        for label, values in (('stalled', stalled), ('load', load)):
+            if values is not None and len(values) != self.count:
+                raise CdrError(f'ActuatorStates: {len(values)} {label} values for '
+                               f'{self.count} names')
+        if stalled is None:
+            self._v_stalled[...] = 0
+        else:
+            np.not_equal(stalled, 0, out=self._v_stalled, casting='unsafe')
+        if load is None:
+            self._v_load[...] = 0.0
+        else:
+            self._v_load[...] = load
+        return super().encode(stamp_ns, commanded, actual)
 
 
 _local = threading.local()
@@ -310,11 +356,13 @@ def encode_belt_states(stamp_ns: int, frame_id: str, names: Sequence[str],
 
 
 def encode_actuator_states(stamp_ns: int, frame_id: str, names: Sequence[str],
-                           commanded_position: Any, position: Any) -> bytes:
-    """Return the CDR bytes of an ActuatorStates message; positions [m] or [rad]."""
+                           commanded_position: Any, position: Any, stalled: Any = None,
+                           load: Any = None) -> bytes:
+    """Return the CDR bytes of an ActuatorStates message; positions [m] or [rad], stall
+    flags (None: none stalled), loads [N] (None: zeros)."""
     names = tuple(names)
     encoder = _cached(ActuatorStatesEncoder, (frame_id, names), frame_id, names)
-    return encoder.encode(stamp_ns, commanded_position, position)
+    return encoder.encode(stamp_ns, commanded_position, position, stalled, load)
 
 
 def encode_light_barrier_edge(stamp_ns: int, frame_id: str, name: str, blocked: bool,

@@ -126,7 +126,8 @@ def mutate(doc: Any, rng: random.Random) -> str:
 
 def invalid_values(node: Any, where: str = 'cell') -> List[str]:
     """Return what an accepted :class:`Cell` holds that no cell may: non-finite or huge
-    numbers, coordinates beyond the limit, booleans as numbers, empty or unprintable strings."""
+    numbers (but an actuator's unlimited force_limit), coordinates beyond the limit, booleans as
+    numbers, empty or unprintable strings."""
     found: List[str] = []
     if dataclasses.is_dataclass(node):
         for f in dataclasses.fields(node):
@@ -137,6 +138,8 @@ def invalid_values(node: Any, where: str = 'cell') -> List[str]:
     elif isinstance(node, bool):
         pass
     elif isinstance(node, float):
+        if where.endswith('.force_limit') and node == math.inf:
+            return found
         if not math.isfinite(node) or abs(node) > 1e12:
             found.append(f'{where} = {node!r}')
     elif isinstance(node, int):

@@ -1,9 +1,9 @@
 """The axes of the combination matrix and the checks shared by its tests (no ROS imports).
 
-Cells: every shipped cell and the cells of the example plant. Faults: one of each family of
-``docs/faults.md`` (barrier, drive, command, material, stream), built for a cell from its own
-names and armed as a scenario file by step, so that every output of a run sees the same faults
-at the same steps. Checks: a stream is *live* when it has exactly one message for every step
+Cells: every shipped cell (straight ones, and those with a curved belt or a transfer unit) and
+the cells of the example plant. Faults: one of each family of ``docs/faults.md`` (barrier,
+drive, command, material, stream), built for a cell from its own names and armed as a scenario
+file by step, so that every output of a run sees the same faults at the same steps. Checks: a stream is *live* when it has exactly one message for every step
 of the run except the steps a ``stream_outage`` silenced it (known from the run's ``faults``
 stream), and two outputs *agree* when they carry the same bytes for the same stamps.
 """
@@ -45,15 +45,24 @@ class CellCase:
         return _load(self.path)
 
 
-SHIPPED_CELLS = (
+STRAIGHT_CELLS = (
     CellCase('default', SHIPPED / 'default_cell.yaml'),
     CellCase('multiscale', SHIPPED / 'examples' / 'multiscale.yaml'),
     CellCase('sorting', SHIPPED / 'examples' / 'sorting.yaml'),
     CellCase('merge', SHIPPED / 'examples' / 'merge.yaml'),
 )
+#: The shipped cells with a curved belt or a transfer unit.
+CURVED_CELLS = (
+    CellCase('l_line', SHIPPED / 'examples' / 'l_line.yaml'),
+    CellCase('transfer', SHIPPED / 'examples' / 'transfer.yaml'),
+)
+SHIPPED_CELLS = STRAIGHT_CELLS + CURVED_CELLS
 PLANT_CELLS = tuple(CellCase(f'plant_{name}', PLANT.parent / f'{name}.yaml', True)
                     for name in ('infeed', 'deflector', 'sorter', 'buffer'))
 CELLS = SHIPPED_CELLS + PLANT_CELLS
+#: The order in which the cells take the streams of :data:`OUTAGE_ROTATION` (cells added
+#: later come last, so every cell keeps the stream it had).
+_ROTATION_ORDER = STRAIGHT_CELLS + PLANT_CELLS + CURVED_CELLS
 
 #: Steps of one run of the matrix [1]; every fault below starts and ends within them.
 STEPS = 400
@@ -72,7 +81,7 @@ COMMAND_FRACTION = 0.6
 
 def outage_stream(case: CellCase) -> str:
     """Return the stream the ``stream_outage`` of ``case`` silences (one with messages)."""
-    stream = OUTAGE_ROTATION[CELLS.index(case) % len(OUTAGE_ROTATION)]
+    stream = OUTAGE_ROTATION[_ROTATION_ORDER.index(case) % len(OUTAGE_ROTATION)]
     if stream == 'density' and not macro_zones(case.cell):
         return 'parts'
     return stream
@@ -129,12 +138,8 @@ def fault_entries(case: CellCase, families: Optional[Sequence[str]] = None) -> L
 
 
 def _extent(cell: Cell) -> Tuple[float, float, float, float]:
-    xs, ys = [], []
-    for belt in cell.belts:
-        for x, y in belt.corners():
-            xs.append(x)
-            ys.append(y)
-    return min(xs), max(xs), min(ys), max(ys)
+    x0, y0, x1, y1 = cell.bounds
+    return x0, x1, y0, y1
 
 
 def write_scenario(path: Path, case: CellCase,

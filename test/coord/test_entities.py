@@ -129,3 +129,20 @@ def test_runs_without_deletes_keep_their_bytes_and_a_delete_changes_them() -> No
     a.step(10)
     b.step(10)
     assert not np.array_equal(a.micro.parts()[0], b.micro.parts()[0])
+
+
+def test_a_curved_belt_and_a_transfer_unit_have_poses() -> None:
+    from pathlib import Path
+    examples = Path(entities.__file__).resolve().parents[1] / 'cell' / 'examples'
+    cell = load_cell(examples / 'l_line.yaml')
+    listed = entities.static_entities(cell)
+    bend = next(e for e in listed if e.name == 'belt_bend')
+    pose = entities.entity_state(cell, bend, None, np.zeros(0))
+    r = 0.6 / math.sqrt(2.0)    # the middle of the centre line, heading up and to the left
+    assert (pose.x, pose.y, pose.yaw) == pytest.approx((2.0 + r, 0.6 - r, math.pi / 4))
+    reach = entities.footprint_radius(cell, bend)
+    assert all(math.dist((pose.x, pose.y), p) <= reach for p in cell.belts[1].outline(1e-4))
+    cell = load_cell(examples / 'transfer.yaml')
+    xfer = next(e for e in entities.static_entities(cell) if e.name == 'actuator_xfer')
+    pose = entities.entity_state(cell, xfer, None, np.array([0.015]))
+    assert (pose.x, pose.y, pose.z, pose.yaw) == pytest.approx((1.5, 0.0, 0.015, math.pi / 2))

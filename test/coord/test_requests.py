@@ -82,3 +82,19 @@ def test_every_shipped_cell_takes_a_part_on_each_belt_centre() -> None:
                 check_spawn(cell, part.name, xs, ys, [])
             except RequestRejected as exc:  # a belt may carry an obstacle there: say which
                 assert 'overlaps' in str(exc), (path, str(exc))
+
+
+def test_spawns_on_a_curved_belt_follow_its_annular_sector() -> None:
+    from pathlib import Path
+    import conveyor_twin.cell as cells
+    cell = load_cell(Path(cells.__file__).parent / 'examples' / 'l_line.yaml')
+    bend = cell.belts[1]
+    mx, my = bend.centre_line(3)[1]              # the middle of the curve's centre line
+    assert check_spawn(cell, 'can', [mx], [my], []).count == 1
+    with pytest.raises(RequestRejected) as info:  # inside the inner arc: on no belt
+        check_spawn(cell, 'can', [2.2], [0.4], [])
+    assert ("belt 'bend': radius 0.4..0.8 m about (2, 0.6) from -90 deg through 90 deg"
+            in str(info.value))
+    with pytest.raises(RequestRejected, match="overlaps wall 'bend_rail_outer'"):
+        cx, cy = bend.curve.centre
+        check_spawn(cell, 'can', [cx + 0.78 * math.cos(-0.8)], [cy + 0.78 * math.sin(-0.8)], [])

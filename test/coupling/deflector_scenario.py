@@ -3,7 +3,7 @@
 Default cell, 2400 spacers at 500 parts/s, one zone over the whole belt: ``micro`` for pure micro,
 ``auto`` for multi-scale (tiles 0.2 m on a 2 cm grid, to macro above 3000 parts/m^2, to micro
 below 1000, dwell 0.2 s, sensor windows 0.05 m, free flow kept micro below a mean slip of 0.1 of
-the belt speed). The macro collision operator is the default cell's (``epsilon`` 1.4 m/s).
+the belt speed). The macro collision operator is the default cell's (``epsilon`` 2.0 m/s).
 20000 steps of 1 ms. Each run records every light-barrier edge, and every 0.1 s the queue in
 front of the deflector and the parts out through the exit, measured the same way at both
 scales. ``test_validation.py`` and ``test_sensor_windows.py`` share the runs (a cache per

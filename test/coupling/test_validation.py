@@ -28,8 +28,8 @@ pytestmark = pytest.mark.slow
 SEEDS = tuple(range(1, 9))
 # Collision-operator speed [m/s] of the default cell: the Goettlich model's one free parameter,
 # chosen so the macro jam queues and discharges as the micro one (seeds 1..8 in
-# docs/validation.md: queue mean +1.2 %, peak +1.3 %, mean exit time +0.2 %).
-DEFLECTOR_EPSILON = 1.4
+# docs/validation.md: queue mean +1.2 %, peak +3.3 %, mean exit time +0.3 %).
+DEFLECTOR_EPSILON = 2.0
 
 
 def _ensemble(policy: str, quantity) -> float:
@@ -101,7 +101,8 @@ def test_stopper_queue_grows_and_dissolves_as_predicted_at_both_scales() -> None
     # at the feed rate until the source stops at 2000 parts); once it opens the jam leaves at
     # the flux of a packed queue moving at the belt speed, rho_jam v W (v = 0.5 m/s, W = 0.5
     # m), with rho_jam the micro jam's packing in front of the stopper; it is gone after its
-    # length L = N / (rho_jam W) has passed at v (plus the parts still arriving).
+    # length L = N / (rho_jam W) has passed at v (plus the parts still arriving). At the
+    # multi-scale the queue's macro part leaves at the packing of the released parts instead.
     micro_up, micro_front, entered = _stopper_run('micro')
     multi_up, multi_front, _ = _stopper_run('auto')
     # growth: the parts fed (the source's count) are upstream, at both scales
@@ -112,9 +113,15 @@ def test_stopper_queue_grows_and_dissolves_as_predicted_at_both_scales() -> None
     assert 0.8 * 11547 < rho_jam <= 11547  # random close packing of the 10 mm discs
     rate = rho_jam * 0.5 * 0.5
     # dissolution: 0.2 s after opening (the stopper has dropped), over 0.4 s
-    for up in (micro_up, multi_up):
-        measured = (up[41] - up[45]) / 0.4
-        assert measured == pytest.approx(rate, rel=0.1)
+    assert (micro_up[41] - micro_up[45]) / 0.4 == pytest.approx(rate, rel=0.1)
+    # Multi-scale: the stopper's sensor window is micro and the queue behind it macro. First
+    # the window's own parts pass the stopper line, packed as the micro jam ...
+    assert (multi_up[41] - multi_up[43]) / 0.2 == pytest.approx(rate, rel=0.1)
+    # ... then the density, released as parts into the gaps of the moving stream in front of
+    # the window (the hand-over keeps part centres plus density there within rho_max): that
+    # stream carries about 0.75 rho_max, below the jam's packing (docs/validation.md)
+    released = (multi_up[43] - multi_up[45]) / 0.2
+    assert 0.7 * 11547 * 0.5 * 0.5 < released < rate
     # gone once the queue has passed at the belt speed (2000 parts: L ~ 0.4 m, 0.8 s) plus
     # the tail of the feed that was still spread upstream: within 2 s at both scales
     assert micro_up[59] == 0 and multi_up[59] == pytest.approx(0.0, abs=0.5)

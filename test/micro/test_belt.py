@@ -72,7 +72,7 @@ def test_surface_friction_heat_is_the_work_less_the_kinetic_energy_gained():
     heat = np.full(n, np.nan)
     sim.mp[MP_DT] = cell.settings.step
     belt_drive(n, sim.state.part_type, P[P_X], P[P_Y], P[P_VX], P[P_VY], P[P_WZ], sim.pt,
-               sim.belts, np.array([0.5]), sim.mp, sim.acc, heat)
+               sim.surfaces, np.array([0.5]), sim.mp, sim.acc, heat)
     v1 = P[[P_VX, P_VY, P_WZ], :n]
     j = part.mass * (v1[:2] - v0[:2])
     work = j[0] * 0.5                                   # the surface moves along +x at 0.5

@@ -9,8 +9,10 @@ from conveyor_twin.micro import MicroSim
 from conveyor_twin.micro.collide import box_vertices, collide
 from conveyor_twin.micro.contacts import (CT_BVX, CT_BVY, CT_BW, CT_E, CT_KA, CT_KB, CT_MU_K,
                                           CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY,
-                                          CT_V_T, detect, limit_energy, prepare_contacts, PV_KA,
-                                          PV_KB, PV_LN, PV_LT, solve_impulses, update_pairs)
+                                          CT_DEPTH, CT_V_T, detect, limit_energy, MP_DT,
+                                          MP_BOUNCE_PASSES, MP_BOUNCE_TOLERANCE, MP_SPEC_MAX,
+                                          MP_TOLERANCE, prepare_contacts, PV_KA, PV_KB, PV_LN,
+                                          PV_LT, restitute, solve_impulses, update_pairs)
 from conveyor_twin.micro.kernel import CF_SKIN
 from conveyor_twin.micro.reference import box_core, collide_ref, sweeps_ref
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
@@ -78,9 +80,9 @@ def test_impulse_sweeps_match_reference():
     x, y, yaw, vx, vy, wz = s.P[:6]
     update_pairs(n, s.ids, s.part_type, x, y, sim.pt, sim.grid.gpar, sim.grid.gdim,
                  sim._cell_table, sim._cell_items, sim._part_cell, sim._cand, sim._nbr,
-                 sim._pos0, sim.cfg[CF_SKIN])
+                 sim._pos0, (sim.cfg[CF_SKIN], sim.mp[MP_SPEC_MAX]))
     parts, _model, drives, grid, statics, contact_arrays = sim._args[:6]
-    nc = detect(n, parts, sim.pt, grid, statics, drives, contact_arrays)
+    nc = detect(n, parts, sim.pt, grid, statics, drives, contact_arrays, sim.mp)
     assert nc >= 5
     ct, cidx, prev = sim._ct, sim._cidx, sim._prev
     # a previous substep that had every other contact (and one more that is gone)
@@ -97,7 +99,8 @@ def test_impulse_sweeps_match_reference():
     contacts = [dict(a=int(cidx[c, 0]), b=int(cidx[c, 1]), n=ct[c, [CT_NX, CT_NY]],
                      ra=ct[c, [CT_RAX, CT_RAY]], rb=ct[c, [CT_RBX, CT_RBY]], e=ct[c, CT_E],
                      mu_s=ct[c, CT_MU_S], mu_k=ct[c, CT_MU_K], v_t=ct[c, CT_V_T],
-                     bv=ct[c, [CT_BVX, CT_BVY]], bw=ct[c, CT_BW], ln=warm.get(c, (0, 0))[0],
+                     bv=ct[c, [CT_BVX, CT_BVY]], bw=ct[c, CT_BW], depth=ct[c, CT_DEPTH],
+                     ln=warm.get(c, (0, 0))[0],
                      lt=warm.get(c, (0, 0))[1]) for c in range(nc)]
     v = np.stack([vx[:n], vy[:n]], 1).copy()
     w = wz[:n].copy()
@@ -105,12 +108,18 @@ def test_impulse_sweeps_match_reference():
     # the energy an island may gain (surface friction's heat), here below 0 on some parts so
     # that the limit acts on some islands and not on others (the arithmetic is the same)
     heat = rng.uniform(-1e-4, 1e-5, size=n)
+    mp = sim.mp
     impulses = sweeps_ref(contacts, v, w, sim.pt[types, PT_INV_MASS],
-                          sim.pt[types, PT_INV_INERTIA], passes=3, heat=heat)
+                          sim.pt[types, PT_INV_INERTIA], passes=3, heat=heat, h=mp[MP_DT],
+                          tolerance=mp[MP_TOLERANCE], bounce_passes=int(mp[MP_BOUNCE_PASSES]),
+                          bounce_tolerance=mp[MP_BOUNCE_TOLERANCE])
     v0 = (vx[:n].copy(), vy[:n].copy(), wz[:n].copy())
-    assert prepare_contacts(nc, ct, cidx, s.part_type, sim.pt, sim.mp, vx, vy, wz, *v0,
-                            prev) == len(warm)
-    solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, sim.mp, sim.acc, prev)
+    found, bounces = prepare_contacts(nc, ct, cidx, s.part_type, sim.pt, mp, vx, vy, wz, *v0,
+                                      prev)
+    assert found == len(warm)
+    solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, mp, sim.acc, prev)
+    assert bounces > 0
+    restitute(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, mp, contact_arrays[7])
     scaled = limit_energy(n, nc, s.part_type, sim.pt, (vx, vy, wz), v0, heat,
                           contact_arrays)
     assert scaled > 0      # the limit is exercised

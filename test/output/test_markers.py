@@ -6,9 +6,11 @@ import os
 import numpy as np
 import pytest
 
-from conveyor_twin.cell import load_cell
+from conveyor_twin.cell import load_cell, load_cell_text
 from conveyor_twin.output import markers as m
 from conveyor_twin.wire.builder import CdrBuilder, stamp_parts, string_bytes
+
+from ..viz.curve_cell import CURVE_CELL
 
 EXAMPLES = sorted(glob.glob(os.path.join(os.path.dirname(m.__file__), '..', 'cell', 'examples',
                                          '*.yaml')))
@@ -36,10 +38,10 @@ def test_fast_marker_equals_general_writer_at_every_alignment(offset, n_points):
     assert bytes(fast) == bytes(general.buf)
 
 
-@pytest.mark.parametrize('cell_file', [None] + EXAMPLES)
+@pytest.mark.parametrize('cell_file', [None] + EXAMPLES + ['curve'])
 def test_cell_markers_equal_the_general_encoding(cell_file):
     """A build equals the MarkerArray of the same markers through the general writer."""
-    cell = load_cell(cell_file)
+    cell = load_cell_text(CURVE_CELL) if cell_file == 'curve' else load_cell(cell_file)
     cm = m.CellMarkers(cell)
     rng = np.random.default_rng(3)
     for n in (0, 1, 7, 1000):

@@ -307,3 +307,29 @@ def test_every_value_of_every_shipped_cell_has_its_tags_type(path) -> None:
         assert type(value) is PYTHON_TYPES[tag.kind], (tag.path, value)
         if tag.modbus_table:
             assert len(modbus_words(tag, value)) == tag.modbus_words
+
+
+
+def test_a_stalled_actuator_shows_in_its_stalled_and_load_tags() -> None:
+    """A pusher with a force limit catching a part against a wall (the micro stall test's)."""
+    from test.micro.test_actuator_stall import LIMIT, pusher_cell, spawn, STROKE
+    cell = pusher_cell()
+    built = build_twin(cell, seed=1)
+    output = TwinOutput([CoordinatorOutput(built.twin, diagnostics=lambda t: None),
+                         MicroOutput(built.micro), MacroOutput(built.macro)])
+    built.twin.step_listeners.append(output.on_step)
+    state = PlcState(cell, mode='lockstep', counters=None, setpoints=None)
+    output.subscribe(state)
+    stalled, load = (state.map.by_path(f'Actuators/pusher/{k}') for k in ('Stalled', 'Load'))
+    assert stalled.modbus_table == 'discrete' and load.unit == 'N'
+    spawn(built, [0.5], [0.0])
+    built.twin.commands.submit_actuator('pusher', STROKE)
+    seen = []
+    for _ in range(700):
+        built.step(1)
+        view = state.refresh()
+        seen.append((view.value(stalled), view.value(load)))
+        assert view.value(stalled) == bool(built.twin.actuation.stalled[0])
+        assert view.value(load) == built.twin.actuation.actuator_load[0]
+    assert seen[0] == (False, 0.0)
+    assert any(s and f > LIMIT for s, f in seen) and seen[-1][0]

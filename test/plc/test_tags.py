@@ -43,7 +43,7 @@ def test_map_of_a_shipped_cell_has_unique_paths_and_contiguous_tables(path: Path
     assert len(set(paths)) == len(paths)
     assert all(tags.by_path(p).path == p for p in paths)
     expected = (9 + 4 + 5 * len(cell.light_barriers) + 2 * len(cell.belts)
-                + 2 * len(cell.actuators))
+                + 4 * len(cell.actuators))  # Target, Position, Stalled, Load
     assert len(tags.tags) == expected
     for table in MODBUS_TABLES:
         address = 0

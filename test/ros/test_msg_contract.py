@@ -57,6 +57,7 @@ CONTRACT_MSGS: Dict[str, List[Tuple[str, str]]] = {
     'ActuatorStates': [
         ('header', 'std_msgs/Header'), ('name', 'string[]'),
         ('commanded_position', 'float64[]'), ('position', 'float64[]'),
+        ('stalled', 'bool[]'), ('load', 'float64[]'),
     ],
     # the faults interface (docs/faults.md), beyond architecture.md's list
     'FaultState': [

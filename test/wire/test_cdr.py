@@ -142,16 +142,35 @@ def test_belt_and_actuator_states(kind, names):
         data = cdr.encode_belt_states(7, 'cell', names, commanded, actual)
         type_name, fields = 'conveyor_twin_msgs/msg/BeltStates', ('commanded_speed', 'speed')
     else:
-        data = cdr.encode_actuator_states(7, 'cell', names, commanded, actual)
+        stalled, load = np.arange(n) % 2 == 0, np.linspace(0.0, 250.0, n)
+        data = cdr.encode_actuator_states(7, 'cell', names, commanded, actual, stalled, load)
         type_name = 'conveyor_twin_msgs/msg/ActuatorStates'
         fields = ('commanded_position', 'position')
     value = {'header': header(7, 'cell'), 'name': list(names), fields[0]: commanded.tolist(),
              fields[1]: actual.tolist()}
+    if kind == 'actuator':
+        value.update(stalled=stalled.tolist(), load=load.tolist())
+        back = cdr.decode_actuator_states(data)
+        assert back.stalled.tolist() == stalled.tolist() and back.load.tolist() == load.tolist()
+        assert back.actual.tolist() == actual.tolist() and back.names == tuple(names)
+        with pytest.raises(cdr.CdrError):
+            cdr.encode_actuator_states(7, 'cell', names, commanded, actual, stalled,
+                                       np.zeros(n + 1))
     assert data == serialize(type_name, value)[0]
     decoded = mcap_decode(type_name, data)
     assert list(getattr(decoded, fields[1])) == actual.tolist()
     with pytest.raises(cdr.CdrError):
         cdr.encode_belt_states(7, 'cell', names, commanded, np.zeros(n + 1))
+
+
+def test_actuator_states_of_the_earlier_layout():
+    """A recorded message without the stall fields decodes with none stalled and zero load."""
+    pair = cdr.encode_belt_states(7, 'cell', ('pusher',), [0.5], [0.25])  # the same layout
+    back = cdr.decode_actuator_states(pair)
+    assert back.actual.tolist() == [0.25] and back.stalled.tolist() == [False]
+    assert back.load.tolist() == [0.0]
+    unset = cdr.decode_actuator_states(cdr.encode_actuator_states(7, 'cell', ('a',), [0], [0]))
+    assert unset.stalled.tolist() == [False] and unset.load.tolist() == [0.0]
 
 
 @pytest.mark.parametrize('blocked', [True, False])

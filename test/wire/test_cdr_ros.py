@@ -72,10 +72,14 @@ def test_belt_actuator_states_and_edge():
     msg = serialization.deserialize_message(data, msgs.BeltStates)
     assert list(msg.speed) == [0.5, 1.5] and list(msg.name) == ['a', 'bb']
     assert_same_bytes(data, serialization.serialize_message(msg))
-    data = cdr.encode_actuator_states(11, 'cell', ('pusher',), [0.1], [0.05])
+    data = cdr.encode_actuator_states(11, 'cell', ('pusher', 'arm'), [0.1, 0.2], [0.05, 0.1],
+                                      [True, False], [123.5, 0.0])
     msg = serialization.deserialize_message(data, msgs.ActuatorStates)
-    assert list(msg.position) == [0.05]
+    assert list(msg.position) == [0.05, 0.1]
+    assert list(msg.stalled) == [True, False] and list(msg.load) == [123.5, 0.0]
     assert_same_bytes(data, serialization.serialize_message(msg))
+    back = cdr.decode_actuator_states(serialization.serialize_message(msg))
+    assert back.stalled.tolist() == [True, False] and back.load.tolist() == [123.5, 0.0]
     data = cdr.encode_light_barrier_edge(1_000_000_007, 'cell', 'lb', True, 9)
     msg = serialization.deserialize_message(data, msgs.LightBarrierEdge)
     assert (msg.name, msg.blocked, msg.part_id, msg.header.stamp.nanosec) == ('lb', True, 9, 7)

@@ -5,8 +5,8 @@
    materials), in a canonical order whatever the broad phase;
 3. the response, what the contacts do to the bodies, reading only the records (overview and
    the shared friction law in :mod:`.response`): :mod:`.impulses` (impulses and position
-   correction) with :mod:`.energy` (the energy limit of the warm start), or :mod:`.penalty`
-   (penalty forces).
+   correction) with :mod:`.restitution` (the sweep order and the restitution pass) and
+   :mod:`.energy` (the energy limit), or :mod:`.penalty` (penalty forces).
 
 :mod:`.tables` holds the column layouts of the arrays the phases share (model parameters,
 activities, static shapes, actuators, contact records). The names below are re-exported so
@@ -21,6 +21,7 @@ from conveyor_twin.micro.contacts.impulses import (  # noqa: F401
     correct_positions, impulse_response, prepare_contacts, RESTITUTION_THRESHOLD, solve_impulses)
 from conveyor_twin.micro.contacts.narrow_phase import detect, part_shape, scratch  # noqa: F401
 from conveyor_twin.micro.contacts.penalty import penalty_force, penalty_forces  # noqa: F401
+from conveyor_twin.micro.contacts.restitution import restitute  # noqa: F401
 from conveyor_twin.micro.contacts.response import (  # noqa: F401
     friction_coefficient, MODE_IMPULSE, MODE_PENALTY)
 from conveyor_twin.micro.contacts.tables import *  # noqa: F401,F403

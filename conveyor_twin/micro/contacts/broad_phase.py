@@ -90,11 +90,12 @@ def neighbour_arrays(capacity: int):
 
 @njit(cache=True)
 def update_pairs(n, ids, ptype, x, y, pt, gpar, gdim, cell_table, cell_items, part_cell, cand,
-                 nbr, pos0, skin):
+                 nbr, pos0, skins):
     """Keep the candidate pairs of parts 0..n-1 current (a Verlet list with a ``skin`` [m]).
 
     The list holds every pair (i, j), i < j, whose centres were closer than the sum of their
-    bounding radii plus ``skin`` when it was built, in canonical order (i, then j ascending),
+    bounding radii plus ``skin`` plus ``reach`` (the narrow phase's largest speculative margin)
+    when it was built, in canonical order (i, then j ascending),
     and the grid cell of each part then (``part_cell``, for the static shapes; the grid's cells
     and static lists are grown by the skin). It is kept while the same parts (ids, slots) are
     present and none has moved ``NB_MOVE * skin`` since; then no pair outside it can touch, and
@@ -103,11 +104,12 @@ def update_pairs(n, ids, ptype, x, y, pt, gpar, gdim, cell_table, cell_items, pa
     is rebuilt every ``NB_MOVE * skin / (v dt)`` steps.
 
     :param nbr: int64 list (see :func:`neighbour_arrays`), updated. :param pos0: (2, capacity)
-        positions at the build [m], updated. :param skin: [m]; the grid cell must be at least
-        twice the largest bounding radius plus ``skin``.
+        positions at the build [m], updated. :param skins: ``(skin, reach)`` [m]; the grid
+        cell must be at least twice the largest bounding radius plus ``skin`` plus ``reach``.
     :return: 0 kept, 1 rebuilt, 2 rebuilt but full (pairs beyond the capacity are dropped and
         the next call rebuilds).
     """
+    skin, reach = skins
     cap = pos0.shape[1]
     o_ids = NB_HEADER
     o_start = o_ids + cap
@@ -138,7 +140,7 @@ def update_pairs(n, ids, ptype, x, y, pt, gpar, gdim, cell_table, cell_items, pa
         pos0[0, i] = x[i]
         pos0[1, i] = y[i]
         nbr[o_start + i] = npairs
-        bri = pt[ptype[i], PT_BRAD] + skin
+        bri = pt[ptype[i], PT_BRAD] + skin + reach
         c = part_cell[i]
         cy = c // gnx
         cx = c - cy * gnx

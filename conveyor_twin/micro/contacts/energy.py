@@ -1,11 +1,13 @@
 """The energy limit of the impulse model: no island of parts gains more kinetic energy in a
 substep than the external work done on it.
 
-Every sweep of :func:`conveyor_twin.micro.contacts.impulses.solve_impulses` keeps momentum and
-no increment adds kinetic energy, but the warm start can (a stale impulse pushing apart bodies
-that no longer press on each other), so :func:`limit_energy` scales the substep's impulses of
-each island (parts joined by contacts), if needed, so its parts' kinetic energy does not rise by
-more than the external work on them (belt friction, moving actuators).
+Every sweep of :func:`conveyor_twin.micro.contacts.impulses.solve_impulses` and
+:func:`conveyor_twin.micro.contacts.restitution.restitute` keeps momentum, but kinetic energy
+can rise (a warm start's stale impulse pushing apart bodies that no longer press on each other,
+an increment taking back impulse from a contact that still closes), so :func:`limit_energy`
+scales the substep's impulses of each island (parts joined by contacts), if needed, so its
+parts' kinetic energy does not rise by more than the external work on them (belt friction,
+moving actuators).
 """
 
 from numba import njit

@@ -4,37 +4,37 @@ Equal and opposite impulses at each contact point, applied to both bodies at the
 (``r_a``, ``r_b`` from one point), mass- and inertia-weighted through the effective masses
 ``k_n = 1/m_a + 1/m_b + (r_a x n)^2 / I_a + (r_b x n)^2 / I_b`` (fixed and kinematic bodies:
 infinite mass). They are solved as sequential impulses (Catto; Erleben's projected
-Gauss-Seidel): :data:`~conveyor_twin.micro.sim.CONTACT_PASSES` sweeps over the contacts in the
-canonical order, each contact's normal impulse accumulated over the substep and kept >= 0, the
-tangential one kept within ``mu(|u_t|)`` times the normal one (Coulomb, Horváth et al.'s
-speed-dependent coefficient: static at rest, sliding above the transition speed, linear in
-between), each sweep starting from the impulses of the same contact one substep earlier (warm
-start: in a jam they are what holds back the belt's push, so the force chain through hundreds of
-parts need not be built anew every substep). Restitution (Newton's law) acts on the normal
-approach speed before any impulse of the substep, only above :data:`RESTITUTION_THRESHOLD`, so
-resting contacts do not chatter; an isolated impact gets exactly :func:`impulse_response`.
+Gauss-Seidel) in the arrangement of Box2D v3's solver, per substep:
+
+1. :func:`prepare_contacts`: constants, the bounce from the approach before any impulse, and the
+   warm start (each contact starts from its impulses one substep earlier: in a jam they are
+   what holds back the belt's push);
+2. :func:`solve_impulses`: sweeps, alternating forward and backward, each contact's accumulated
+   normal impulse kept >= 0 and bringing the relative normal speed to 0, or to ``-gap / h`` for
+   a speculative contact (recorded by the near phase before the bodies touch: the gap closes
+   exactly within the substep), the accumulated tangential impulse clamped to the Coulomb cone
+   ``mu(|u_t|)`` times the normal one (Horváth et al.'s speed-dependent coefficient); until no
+   increment changes a relative speed by more than a tolerance, at most a fixed number;
+3. :func:`~.restitution.restitute`: restitution in a pass of its own, from the approach speeds
+   stored before the solve, so contacts that happen at once all keep it, and Poisson's impulse
+   for contacts whose approach arose within the substep;
+4. :func:`~.energy.limit_energy`: no island gains more kinetic energy than the external work.
 
 What holds, to round-off, in every sweep: total linear and angular momentum (each impulse has
-its partner, at the same point); no increment adds kinetic energy (a normal increment at most
-reverses the current approach, down to the bounce; a tangential one at most reverses the current
-sliding). The warm start can (a stale impulse pushing apart bodies that no longer press on each
-other), which :func:`conveyor_twin.micro.contacts.energy.limit_energy` bounds. Penetration
-beyond the slop is removed by moving positions only (:func:`correct_positions`,
+its partner, at the same point). Kinetic energy is bounded by the energy limit (a warm start's
+stale impulse, or an increment taking back impulse, could add some). Penetration beyond the
+slop is removed by moving positions only (:func:`correct_positions`,
 :data:`~conveyor_twin.micro.sim.POSITION_PASSES` sweeps, inverse-mass proportion along ``n``):
 it never feeds into velocities, so it adds no energy and no momentum (the centre of mass stays;
 the angular momentum about a fixed point changes by ``m dx x v`` where bodies slide past each
 other while they overlap).
 
-Why warm starting, although Hoher et al. solve each contact once: every contact is still solved
-a fixed number of times per substep (no iteration to a tolerance, so cost and result stay
-time-deterministic), but momentum-conserving sweeps without memory do not hold a jam: on the
-benchmark jam (``conveyor-twin bench micro`` scene, 10 mm discs, 3 s) two such sweeps let the
-discs overlap by 9.6 mm (N = 1000) and 10 mm (N = 5000), i.e. parts pass through each other under
-the belt's push, because a sweep carries an impulse only a contact or two further. With the warm
-start and the same two sweeps the jam comes to rest (velocities of 1e-3 m/s and less while the
-belt runs under it); the deepest overlap, checked every 0.25 s over 6 s, peaks at 0.31 mm
-(N = 1000) and 0.8 mm (N = 5000, at 0.5 s, while the front of the jam forms), is at most
-0.12 mm and 0.34 mm from 0.75 s on and falls to 0.10 and 0.14 mm by 6 s.
+Why warm starting: momentum-conserving sweeps without memory carry an impulse only a contact or
+two further per sweep, so the belt's push on a jam of many rows is never taken back; with the
+warm start a jam at rest needs few sweeps to meet the tolerance (the bench jam of
+``conveyor-twin bench micro`` keeps its deepest overlap at the slop, 0.1 mm of 10 mm discs).
+The sweeps' number depends only on the contacts' values: the same inputs give the same result,
+bit for bit.
 """
 
 import math
@@ -42,16 +42,17 @@ import math
 from numba import njit
 
 from conveyor_twin.micro.contacts.response import friction_coefficient
+from conveyor_twin.micro.contacts.restitution import (RESTITUTION_THRESHOLD, sweep_contact,
+                                                      sweep_plan)
 from conveyor_twin.micro.contacts.tables import (A_CONTACT_FRICTION, CT_BOUNCE, CT_BVX, CT_BVY,
                                                  CT_BW, CT_CNT, CT_DEPTH, CT_E, CT_IKN, CT_IKT,
-                                                 CT_KA, CT_KB, CT_LN, CT_LT, CT_MU_K, CT_MU_S,
-                                                 CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY,
-                                                 CT_SLOPE, CT_V_T, CT_WA, CT_WB, MP_CORRECTION,
-                                                 MP_SLOP, MP_TRACK, PV_KA, PV_KB, PV_LN, PV_LT)
+                                                 CT_KA, CT_KB, CT_LN, CT_LN0, CT_LT, CT_MU_K,
+                                                 CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX,
+                                                 CT_RBY, CT_KN, CT_SLOPE, CT_TARGET, CT_V_T, CT_WA,
+                                                 CT_WB, MP_CORRECTION, MP_DT, MP_SLOP,
+                                                 MP_TOLERANCE, MP_TRACK, PV_KA, PV_KB, PV_LN,
+                                                 PV_LT)
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
-
-# Below this approach speed [m/s] a contact is treated as plastic (no bounce).
-RESTITUTION_THRESHOLD = 0.02
 
 
 @njit(cache=True, inline='always')
@@ -123,22 +124,25 @@ def _masses(ima, iia, imb, iib, rax, ray, rbx, rby, nx, ny):
 @njit(cache=True)
 def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, v0x, v0y, w0, prev):
     """Write the per-contact constants of the impulse and position sweeps and apply the warm
-    start (one pass); return how many contacts found their predecessor.
+    start (one pass); return how many contacts found their predecessor and how many bounce.
 
     Constants: geometry only, so the divisions happen here, where they overlap, and the sweeps
     only multiply: the inverse normal and tangential effective masses, the change of the
-    tangential speed per unit normal impulse, the friction slope and the shares of the
-    position correction (inverse-mass proportion times ``mp[MP_CORRECTION]``). The bounce
-    (``CT_BOUNCE``): ``e`` times the normal approach speed before any impulse of the substep
-    (``v0x``, ``v0y``, ``w0``: the velocities then), 0 below :data:`RESTITUTION_THRESHOLD`.
+    tangential speed per unit normal impulse, the friction slope, the shares of the
+    position correction (inverse-mass proportion times ``mp[MP_CORRECTION]``) and the least
+    normal speed the sweeps allow (``CT_TARGET``: 0 for touching bodies, ``-gap / h`` for a
+    speculative contact, ``h = mp[MP_DT]``). The bounce (``CT_BOUNCE``): ``e`` times the normal
+    approach speed before any impulse of the substep (``v0x``, ``v0y``, ``w0``: the velocities
+    then), 0 below :data:`RESTITUTION_THRESHOLD`; :func:`~.restitution.restitute` applies it
+    after the sweeps.
 
     Warm start (Catto): a contact takes the accumulated impulses of the previous substep's
     contact with the same keys (``CT_KA``, ``CT_KB``; both lists ascend in the canonical order,
     so one merge finds them), the tangential one clamped to ``mu_s`` times the normal one, and
     applies them to both bodies (``vx``, ``vy``, ``wz``), equal and opposite, at the contact
-    point. In a jam the previous impulses are what holds back the belt's push, so the sweeps
-    start from them instead of building a force chain through hundreds of parts anew every
-    substep.
+    point; the normal one is kept in ``CT_LN0`` (0 without a predecessor) for the restitution.
+    In a jam the previous impulses are what holds back the belt's push, so the sweeps start
+    from them instead of building a force chain through hundreds of parts anew every substep.
 
     :param prev: (C + 1, PV_COLUMNS) the previous contacts' keys and impulses, row C their count.
     """
@@ -150,8 +154,10 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, v0x, v0y, w0, prev
     slope = 0.0
     w = 0.0
     nprev = int(prev[prev.shape[0] - 1, 0])
+    inv_h = 1.0 / mp[MP_DT]
     q = 0
     found = 0
+    bounces = 0
     for c in range(nc):
         a = cidx[c, 0]
         b = cidx[c, 1]
@@ -184,7 +190,10 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, v0x, v0y, w0, prev
             last_kn = kn
             last_ikn = 1.0 / kn
         ct[c, CT_IKN] = last_ikn
+        ct[c, CT_KN] = kn
         ct[c, CT_IKT] = 1.0 / kt
+        # a speculative contact (depth < 0: a gap) lets the bodies close it within the substep
+        ct[c, CT_TARGET] = min(ct[c, CT_DEPTH], 0.0) * inv_h
         ct[c, CT_CNT] = cnt
         # the same materials and masses as the contact before (the common case): the same
         # quotients, without dividing again
@@ -205,8 +214,11 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, v0x, v0y, w0, prev
         ct[c, CT_WB] = w * imb
         un = (((v0x[a] - w0[a] * ray) - (vbx - wb * rby)) * nx
               + ((v0y[a] + w0[a] * rax) - (vby + wb * rbx)) * ny)
-        ct[c, CT_BOUNCE] = ct[c, CT_E] * -un if -un > RESTITUTION_THRESHOLD else 0.0
+        bounce = ct[c, CT_E] * -un if -un > RESTITUTION_THRESHOLD else 0.0
+        ct[c, CT_BOUNCE] = bounce
+        bounces += bounce > 0.0
         # warm start
+        ct[c, CT_LN0] = 0.0
         ka = ct[c, CT_KA]
         kb = ct[c, CT_KB]
         while q < nprev and (prev[q, PV_KA] < ka or (prev[q, PV_KA] == ka
@@ -218,6 +230,7 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, v0x, v0y, w0, prev
             limit = mu_s * ln
             lt = min(max(prev[q, PV_LT], -limit), limit)
             ct[c, CT_LN] = ln
+            ct[c, CT_LN0] = ln
             ct[c, CT_LT] = lt
             px = ln * nx - lt * ny
             py = ln * ny + lt * nx
@@ -228,66 +241,43 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, v0x, v0y, w0, prev
                 vx[b] -= px * imb
                 vy[b] -= py * imb
                 wz[b] -= iib * (rbx * py - rby * px)
-    return found
-
-
-@njit(cache=True, inline='always')
-def _sweep_plan(nc, cidx):
-    """Return the sweep order's constants: the number of part-part contacts (they come first),
-    half of it rounded up, and the number of visits of a sweep."""
-    pairs = nc
-    while pairs > 0 and cidx[pairs - 1, 1] < 0:
-        pairs -= 1
-    half = (pairs + 1) // 2
-    return pairs, half, 2 * half + nc - pairs
-
-
-@njit(cache=True, inline='always')
-def _sweep_contact(k, pairs, half):
-    """Return the contact of a sweep's ``k``-th visit, or -1 for none.
-
-    The part-part contacts' two halves alternate (``0, h, 1, h + 1, ...``), then the contacts
-    with fixed and kinematic bodies follow in order. Consecutive contacts of a half often share
-    a body, so each one's impulse waits for the one before; the other half's contact in between
-    is far away (the canonical order follows the parts' slots), so the processor works on both
-    at once. Within each half the order stays canonical.
-    """
-    if k < 2 * half:
-        c = (k & 1) * half + (k >> 1)
-        return c if c < pairs else -1
-    return pairs + k - 2 * half
+    return found, bounces
 
 
 @njit(cache=True)
 def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
-    """Apply the contacts' impulses in ``passes`` sweeps (the order of :func:`_sweep_contact`)
-    after the warm start of :func:`prepare_contacts`; keep the keys and accumulated impulses in
-    ``prev`` for the next substep.
+    """Apply the contacts' impulses in sweeps after the warm start of :func:`prepare_contacts`
+    until no contact's increment changes a relative speed by more than ``mp[MP_TOLERANCE]``
+    [m/s], at most ``passes`` sweeps; keep the keys and accumulated impulses in ``prev`` for
+    the next substep. Return the number of sweeps.
 
-    Sequential impulses with accumulated impulses (Catto): every impulse acts on both bodies of
-    its contact, equal and opposite, at the contact point (the same point for both, so the
-    moments are those of one force), so every sweep keeps total linear and angular momentum to
-    round-off. The normal impulse of a contact accumulated over the substep stays >= 0; each
-    increment brings the relative normal speed ``u_n`` to ``min(b, |u_n|)`` (``b`` its bounce)
-    as far as that allows: a closing contact is stopped or bounced at most back at its approach
-    speed, a separating one slowed toward ``b``, so no increment adds kinetic energy. The
-    tangential increment stops the sliding, the accumulated tangential impulse clamped to
-    ``mu(|u_t|)`` times the normal one (Coulomb, Horváth et al.'s speed-dependent coefficient).
-    An isolated impact gets :func:`impulse_response`'s result in the first sweep and nothing
-    in the later ones.
+    Sequential impulses with accumulated impulses (Catto; Erleben's projected Gauss-Seidel):
+    every impulse acts on both bodies of its contact, equal and opposite, at the contact point
+    (the same point for both, so the moments are those of one force), so every sweep keeps
+    total linear and angular momentum to round-off. Each contact's normal impulse accumulated
+    over the substep stays >= 0 and brings the relative normal speed ``u_n`` to its target
+    (``CT_TARGET``: 0, or ``-gap / h`` for a speculative contact, which then closes its gap
+    exactly); restitution comes afterwards (:func:`~.restitution.restitute`). The accumulated
+    tangential impulse is clamped to the Coulomb cone ``[-mu ln, mu ln]`` (``mu`` Horváth et
+    al.'s speed-dependent coefficient at the current sliding speed), so no contact ever holds
+    more than its normal impulse allows. Sweeps alternate forward and backward over the
+    contacts (:func:`~.restitution.sweep_contact`), so no contact is always solved last.
 
-    The sweeps are Gauss-Seidel: each contact sees the velocities left by the ones before it,
-    so the per-contact work is a dependency chain; the records must have been prepared by
-    :func:`prepare_contacts` (the sweeps only multiply).
+    The stopping rule depends on the contacts' values only: the same inputs give the same
+    number of sweeps, bit for bit. The records must have been prepared by
+    :func:`prepare_contacts` (the sweeps only multiply); the per-contact work is branch-free
+    (the outcome of closing/separating, sticking/sliding is data-dependent and would
+    mispredict).
     """
     track = mp[MP_TRACK] != 0.0
-    pairs, half, visits = _sweep_plan(nc, cidx)
+    tol = mp[MP_TOLERANCE]
+    pairs, half, visits = sweep_plan(nc, cidx)
+    done = 0
     for it in range(passes):
-        last = it == passes - 1
-        # branch-free per contact (the outcome of closing/separating, sticking/sliding is
-        # data-dependent and would mispredict)
-        for k in range(visits):
-            c = _sweep_contact(k, pairs, half)
+        residual = 0.0
+        for kk in range(visits):
+            k = kk if it % 2 == 0 else visits - 1 - kk
+            c = sweep_contact(k, pairs, half)
             if c < 0:
                 continue
             a = cidx[c, 0]
@@ -324,7 +314,7 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
             uy = (vay + wa * rax) - (vby + wb * rbx)
             un = ux * nx + uy * ny
             ln = ct[c, CT_LN]
-            ln1 = max(ln + (min(ct[c, CT_BOUNCE], abs(un)) - un) * ct[c, CT_IKN], 0.0)
+            ln1 = max(ln + (ct[c, CT_TARGET] - un) * ct[c, CT_IKN], 0.0)
             jn = ln1 - ln
             ut = (uy * nx - ux * ny) + jn * ct[c, CT_CNT]
             speed = abs(ut)
@@ -332,15 +322,11 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
                   else ct[c, CT_MU_K])
             limit = mu * ln1
             lt = ct[c, CT_LT]
-            dt = -ut * ct[c, CT_IKT]
-            jt = min(max(lt + dt, -limit), limit) - lt
-            # an increment between 0 and 2 dt does not add energy
-            # as far as an increment may go without adding energy: between 0 and 2 dt (where
-            # the cone shrank, the accumulated impulse stays outside until an increment may)
-            jt = min(max(jt, min(0.0, 2.0 * dt)), max(0.0, 2.0 * dt))
-            lt1 = lt + jt
+            lt1 = min(max(lt - ut * ct[c, CT_IKT], -limit), limit)
+            jt = lt1 - lt
             ct[c, CT_LN] = ln1
             ct[c, CT_LT] = lt1
+            residual = max(residual, (abs(jn) + abs(jt)) * ct[c, CT_KN])
             # total impulse along x, y (t = (-ny, nx)) and its moments
             px = jn * nx - jt * ny
             py = jn * ny + jt * nx
@@ -353,12 +339,16 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
                 wz[b] = wb - iib * (rbx * py - rby * px)
             if track:
                 acc[A_CONTACT_FRICTION] += abs(jt * ut)
-            if last:
-                prev[c, PV_KA] = ct[c, CT_KA]
-                prev[c, PV_KB] = ct[c, CT_KB]
-                prev[c, PV_LN] = ln1
-                prev[c, PV_LT] = lt1
+        done = it + 1
+        if residual <= tol:
+            break
+    for c in range(nc):
+        prev[c, PV_KA] = ct[c, CT_KA]
+        prev[c, PV_KB] = ct[c, CT_KB]
+        prev[c, PV_LN] = ct[c, CT_LN]
+        prev[c, PV_LT] = ct[c, CT_LT]
     prev[prev.shape[0] - 1, 0] = nc
+    return done
 
 
 @njit(cache=True)

@@ -6,10 +6,11 @@ codes of ``cfg[CF_MODE]``):
 - :mod:`.impulses`, the impulse model: equal and opposite impulses at each contact point,
   solved as sequential impulses with a warm start (:func:`~.impulses.prepare_contacts`,
   :func:`~.impulses.solve_impulses`), restitution above
-  :data:`~.impulses.RESTITUTION_THRESHOLD`, and the penetration correction by positions only
-  (:func:`~.impulses.correct_positions`); every sweep keeps momentum and adds no kinetic energy;
-- :mod:`.energy`: what the warm start may add, bounded per island of parts by the external
-  work on it (:func:`~.energy.limit_energy`);
+  :data:`~.impulses.RESTITUTION_THRESHOLD` in a pass of its own (:mod:`.restitution`), and the
+  penetration correction by positions only (:func:`~.impulses.correct_positions`); every sweep
+  keeps momentum;
+- :mod:`.energy`: the kinetic energy the impulses may add, bounded per island of parts by the
+  external work on it (:func:`~.energy.limit_energy`);
 - :mod:`.penalty`, the penalty model: a spring-damper per contact point,
   ``f_n = max(0, k d - c u_n)``, and a Coulomb friction force ``min(mu f_n, |u_t| / (k_t dt))``
   against the sliding (:func:`~.penalty.penalty_forces`); no position correction.

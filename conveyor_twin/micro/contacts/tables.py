@@ -13,7 +13,12 @@ MP_DT = 4             # substep [s]
 MP_GRAVITY = 5        # [m/s^2]
 MP_FLOOR_MU = 6       # friction coefficient off the belts
 MP_TRACK = 7          # 1.0: accumulate activities
-MP_COLUMNS = 8
+MP_SPEC_MARGIN = 8    # speculative contacts: gap beyond the closing travel of a substep [m]
+MP_SPEC_MAX = 9       # speculative contacts: largest gap recorded [m] (0: touching only)
+MP_TOLERANCE = 10     # impulse sweeps end when no increment changed a relative speed more [m/s]
+MP_BOUNCE_TOLERANCE = 11  # the same for the restitution sweeps [m/s]
+MP_BOUNCE_PASSES = 12     # most restitution sweeps per substep
+MP_COLUMNS = 13
 
 # --- activity slots [J] (Rideout and Stein: integral of |power| dt per element class) ---
 A_SPRING = 0
@@ -64,7 +69,7 @@ CT_RAX = 2            # contact point relative to a's centre [m]
 CT_RAY = 3
 CT_RBX = 4            # relative to b's centre or the kinematic body's pivot [m]
 CT_RBY = 5
-CT_DEPTH = 6          # penetration at detection [m]
+CT_DEPTH = 6          # penetration at detection [m] (< 0: a speculative contact's gap)
 CT_E = 7
 CT_MU_S = 8
 CT_MU_K = 9
@@ -82,10 +87,13 @@ CT_CNT = 19           # change of the tangential speed per unit normal impulse [
 CT_KA = 20            # key: id of a (+ 2^40 against a fixed or kinematic body) [-]
 CT_KB = 21            # key: 2 (id of b, or the shape's index) + the contact point's index [-]
 # written by :func:`prepare_contacts` (the bounce, the warm start) and the impulse sweeps
-CT_BOUNCE = 22        # normal separation speed restitution asks for [m/s]
+CT_BOUNCE = 22        # normal separation speed restitution asks for [m/s] (0: none)
 CT_LN = 23            # accumulated normal impulse of the substep [N s]
 CT_LT = 24            # accumulated tangential impulse [N s]
-CT_COLUMNS = 25
+CT_KN = 25            # normal effective mass's inverse [1/kg] (the sweeps' residual)
+CT_TARGET = 26        # least relative normal speed the sweeps allow: min(depth, 0) / h [m/s]
+CT_LN0 = 27           # the warm start's normal impulse [N s] (0: none)
+CT_COLUMNS = 28
 
 # --- the previous substep's contacts (``prev`` (C + 1, PV_COLUMNS); row C, column 0: count) ---
 PV_KA = 0
