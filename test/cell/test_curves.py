@@ -469,5 +469,9 @@ def test_straight_cells_load_exactly_as_before(name: Optional[str]) -> None:
     assert all(a.surface_speed == 0.0 for a in cell.actuators)
     plain = _plain(cell)
     plain['source_file'] = ''
+    if name is None:
+        # the default cell's collision operator was recalibrated afterwards (1.4 -> 2.0 m/s)
+        assert plain['macro']['epsilon'] == 2.0
+        plain['macro']['epsilon'] = 1.4
     digest = hashlib.sha256(json.dumps(plain, sort_keys=True).encode()).hexdigest()[:16]
     assert digest == STRAIGHT_CELLS[name]
