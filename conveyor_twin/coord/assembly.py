@@ -102,7 +102,7 @@ def build_twin(cell: Cell, *, seed: int, check_balance: Optional[bool] = None) -
     macro = MacroStage(cell, seed)
     coupling = ScaleCoupling(micro, macro, barriers=barriers, check=check_balance)
     twin = Twin(cell, seed=seed, stages=[micro, macro, coupling],
-                actuator_load=micro.actuator_load)
+                actuator_load=micro.actuator_load if cell.actuators else None)
     return AssembledTwin(cell, seed, twin=twin, micro=micro, macro=macro, coupling=coupling)
 
 
