@@ -74,6 +74,9 @@ class Region:
         self.face_skip = [np.zeros(a.shape, dtype=np.uint8) for a in self.face_acc]
         self.occ = np.zeros((g.ny, g.nx))
         self.w = max(1, int(math.ceil(radius / g.h)))
+        # depth [cells] of the sensor windows' entrances (density from a macro tile waits there)
+        self.entrance = _ho.entrance_depth(self.w, sim.rho_max, g.h)
+        self.windows = (self.closed, self.entrance)  # as the hold-back takes them
         # spots over the whole window, so parts can leave side by side at the part spacing
         self.offsets = lattice((self.w + 0.5) * g.h, 2.0 * radius + CLEARANCE)
         self.rot = np.zeros(1, dtype=np.int64)

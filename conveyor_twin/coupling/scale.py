@@ -19,9 +19,11 @@ cell mask (all cells for ``macro``; the cells of macro tiles for ``auto``). Each
    front of sensor windows, whose cells take no density: every part that reaches a light
    barrier or an actuator there is a micro part (thin fronts are gathered, remainders with
    nothing behind them let past: :func:`~conveyor_twin.coupling.handover.gather_fronts`; density
-   coming straight from a macro tile is released in the window's entrance cells). Wherever a
-   window of ``2 w + 1`` neighbouring cells / faces (``w`` cells cover a part's radius) holds
-   a whole part, one part is placed at the window's mass centre (outside the grid for faces) with the
+   coming straight from a macro tile is released in the window's entrance cells, as deep as
+   a release window needs to hold a whole part:
+   :func:`~conveyor_twin.coupling.handover.entrance_depth`). Wherever a window of ``2 w + 1``
+   neighbouring cells / faces (``w`` cells cover a part's radius) holds a whole part, one
+   part is placed at the window's mass centre (outside the grid for faces) with the
    local belt velocity, without overlap: a lattice of part-diameter offsets over the whole
    window is tried, downstream along the local flow first, never onto an active cell (so it
    is not captured again) nor, on a grid with curved belts, onto a cell off the belts or
@@ -288,7 +290,7 @@ class ScaleCoupling:
         v = self.micro.state.P
         _ho.hold_back_runs(sim.density, region.runs, region.n_runs, region.active, sim.solid,
                            sim.cell_velocity, g.origin_x, g.origin_y, g.h, sim.rho_max, v[0],
-                           v[1], self.micro.n, region.occ, region.closed)
+                           v[1], self.micro.n, region.occ, region.windows)
         if region.border.shape[0]:
             _ho.gather_fronts(sim.density, region.active, region.closed, sim.solid,
                               sim.cell_velocity, g.h, region.border, region.w, region.runs,

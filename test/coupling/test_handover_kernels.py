@@ -50,9 +50,9 @@ def test_hold_back_over_runs_equals_the_full_sweep() -> None:
     m = ho.inactive_runs(active, runs)
     a, b = rho.copy(), rho.copy()
     occ = np.zeros((ny, nx))
-    ho.hold_back(a, active, solid, vel, 0.0, 0.0, h, 10000.0, x, y, 200, occ, closed)
+    ho.hold_back(a, active, solid, vel, 0.0, 0.0, h, 10000.0, x, y, 200, occ, (closed, 1))
     ho.hold_back_runs(b, runs, m, active, solid, vel, 0.0, 0.0, h, 10000.0, x, y, 200, occ,
-                      closed)
+                      (closed, 1))
     assert a.tobytes() == b.tobytes() and not np.array_equal(a, rho)
     assert a.sum() == pytest.approx(rho.sum(), rel=1e-12)
     # no density is left in the window (but rows 4 and 5: row 4 flows along -y and pushes into
@@ -63,6 +63,44 @@ def test_hold_back_over_runs_equals_the_full_sweep() -> None:
     assert not a[window].any()
     # ... but in front of a macro cell it stays in the window's entrance cell
     assert a[1, 9] == rho[1, 9] + rho[1, 10] and a[1, 10] == 0.0
+
+
+def test_a_window_entrance_is_as_deep_as_a_release_window_needs() -> None:
+    ny, nx, h = 3, 14, 0.05
+    active = np.zeros((ny, nx), dtype=np.uint8)
+    active[:, 3:6] = 1  # a macro tile right in front of the window (flow along +x)
+    active[2, :] = 0  # row 2: micro in front of the window
+    solid = np.zeros((ny, nx), dtype=np.uint8)
+    closed = np.zeros((ny, nx), dtype=np.uint8)
+    closed[:, 6:11] = 1
+    vel = np.zeros((ny, nx, 2))
+    vel[..., 0] = 0.5
+    rho = np.zeros((ny, nx))
+    rho[:, 6:11] = 100.0
+    runs = np.zeros((ny * nx, 3), dtype=np.int64)
+    m = ho.inactive_runs(active, runs)
+    occ = np.zeros((ny, nx))
+    x = y = np.zeros(1)
+    for depth in (1, 2, 3):
+        a, b = rho.copy(), rho.copy()
+        ho.hold_back(a, active, solid, vel, 0.0, 0.0, h, 1e4, x, y, 0, occ, (closed, depth))
+        ho.hold_back_runs(b, runs, m, active, solid, vel, 0.0, 0.0, h, 1e4, x, y, 0, occ,
+                          (closed, depth))
+        assert a.tobytes() == b.tobytes() and a.sum() == pytest.approx(rho.sum(), rel=1e-12)
+        # behind the macro tile the density stays in the first ``depth`` cells of the window
+        # (the last of them takes what flowed further) ...
+        expected = np.zeros(5)
+        expected[:depth - 1] = 100.0
+        expected[depth - 1] = 100.0 * (5 - depth + 1)
+        assert np.array_equal(a[0, 6:11], expected) and np.array_equal(a[1, 6:11], expected)
+        # ... and in front of a micro tile none of it enters the window
+        assert not a[2, 6:11].any() and a[2, 5] == 500.0
+    # a row of 2 w + 1 cells holding a part at ENTRANCE_FILL rho_max: one cell deep; large
+    # parts on small cells: deeper, at most 2 w + 1
+    assert ho.entrance_depth(1, 11547.0, 0.02) == 1
+    assert ho.entrance_depth(2, 265.08, 0.02) == 3  # cans of 33 mm on 2 cm cells
+    assert ho.entrance_depth(1, 100.0, 0.02) == 3
+    assert ho.entrance_depth(2, 1.0 / (5 * ho.ENTRANCE_FILL * 0.02 ** 2), 0.02) == 1
 
 
 def test_take_cells_and_deposit_match_the_references() -> None:

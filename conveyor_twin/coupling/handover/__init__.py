@@ -23,7 +23,8 @@ from conveyor_twin.coupling.handover.deposit import (capture_mask, deposit_disc,
                                                      DEPOSIT_SAMPLES)
 from conveyor_twin.coupling.handover.gather import (border_cells, gather_fronts, GATHER_SLACK,
                                                     STALE_CELLS, STALE_MASS)
-from conveyor_twin.coupling.handover.hold_back import (hold_back, hold_back_runs, inactive_runs,
+from conveyor_twin.coupling.handover.hold_back import (entrance_depth, ENTRANCE_FILL, hold_back,
+                                                       hold_back_runs, inactive_runs,
                                                        push_out_of_window, push_upstream,
                                                        upstream_of)
 from conveyor_twin.coupling.handover.outflow import (accumulate_faces, side_max, take_cells,
@@ -34,7 +35,8 @@ from conveyor_twin.coupling.handover.release import (micro_blocks, next_uniform,
 
 __all__ = [
     'accumulate_faces', 'border_cells', 'bucket_add', 'bucket_parts', 'BUCKET_SLACK', 'BUCKETS',
-    'capture_mask', 'deposit_disc', 'deposit_push', 'DEPOSIT_SAMPLES',
+    'capture_mask', 'deposit_disc', 'deposit_push', 'DEPOSIT_SAMPLES', 'entrance_depth',
+    'ENTRANCE_FILL',
     'gather_fronts', 'GATHER_SLACK', 'hold_back', 'hold_back_runs', 'inactive_runs',
     'micro_blocks', 'near_parts', 'next_uniform', 'push_out_of_window', 'push_upstream',
     'RELEASE_ROUND_OFF', 'release_windows', 'side_max', 'STALE_CELLS', 'STALE_MASS',
