@@ -220,7 +220,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                                                    fx, fy, tz, prev)
                 solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev)
                 if bounces:
-                    restitute(nc, ct, cidx, ptype, vx, vy, wz, pt, mp, island)
+                    restitute(nc, ct, cidx, ptype, vx, vy, wz, pt, mp, island, prev)
                 add_actuator_load(nc, ct, cidx, n_static, (vx, vy, wz), mp, h, inv_dt, False,
                                   act_load)
                 limit_energy(n, nc, ptype, pt, (vx, vy, wz), (fx, fy, tz), heat, contacts)

@@ -209,13 +209,13 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
             if residual <= tolerance:
                 break
 
-    def solve(k):
+    def solve(k, touching=False):
         c = contacts[k]
         n = np.asarray(c['n'], dtype=float)
         t = np.array([-n[1], n[0]])
         un = relative(c) @ n
         ln, lt = acc[k]
-        target = min(c['depth'], 0.0) / h
+        target = 0.0 if touching else min(c['depth'], 0.0) / h
         ln1 = max(ln + (target - un) / inverse_mass(c, n), 0.0)
         apply(c, (ln1 - ln) * n)
         ut = relative(c) @ t
@@ -240,7 +240,44 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
 
     sweeps(order, passes, solve, tolerance)
     kept = [list(a) for a in acc]      # the next substep's warm start: before the bounce
-    bouncing = [k for k in order if bounce[k] > 0.0 and acc[k][0] > 0.0]
+    # impacts (no warm start) of free islands (none of their loaded contacts warm started or on
+    # a moving body): Poisson's restitution on their compression swept to convergence as
+    # touching contacts, and no warm start from them; in held islands an impact struck within
+    # the substep gets e times its impact impulse, the bouncing contacts are driven to their
+    # bounce speed
+    loaded = [c for k, c in enumerate(contacts) if acc[k][0] > 0.0]
+    group = {i: {i} for c in loaded for i in (c['a'], c['b']) if i >= 0}
+    for c in loaded:
+        if c['b'] >= 0 and group[c['a']] is not group[c['b']]:
+            group[c['a']] |= group[c['b']]
+            for i in group[c['b']]:
+                group[i] = group[c['a']]
+    held = [group[c['a']] for c in loaded if c['ln'] != 0.0
+            or (c['b'] < 0 and (np.any(np.asarray(c['bv']) != 0.0) or c['bw'] != 0.0))]
+
+    def impact(k):
+        c = contacts[k]
+        p = acc[k][0] - min(c['depth'], 0.0) / h / inverse_mass(c, c['n'])
+        return (acc[k][0] > 0.0 and c['ln'] == 0.0 and c['e'] > 0.0
+                and (bounce[k] > 0.0 or p * inverse_mass(c, c['n']) > 0.02)), p
+
+    impacts = []
+    for k in order:
+        if impact(k)[0] and any(group[contacts[k]['a']] is g for g in held):
+            if bounce[k] == 0.0:
+                c = contacts[k]
+                apply(c, c['e'] * impact(k)[1] * np.asarray(c['n'], dtype=float))
+                acc[k][0] += c['e'] * impact(k)[1]
+        elif impact(k)[0]:
+            impacts.append(k)
+    bouncing = [k for k in order if bounce[k] > 0.0 and acc[k][0] > 0.0 and k not in impacts]
+    if impacts:
+        sweeps(impacts, bounce_passes, lambda k: solve(k, True), bounce_tolerance)
+        for k in impacts:
+            c = contacts[k]
+            apply(c, c['e'] * acc[k][0] * np.asarray(c['n'], dtype=float))
+            acc[k][0] *= 1.0 + c['e']
+            kept[k] = [0.0, 0.0]
     if bouncing:
         sweeps(bouncing, bounce_passes, bounce_step, bounce_tolerance)
     # no rise of the kinetic energy of any island (parts joined by contacts) beyond the heat of

@@ -119,7 +119,7 @@ def test_impulse_sweeps_match_reference():
     assert found == len(warm)
     solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, mp, sim.acc, prev)
     assert bounces > 0
-    restitute(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, mp, contact_arrays[7])
+    restitute(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, mp, contact_arrays[7], prev)
     scaled = limit_energy(n, nc, s.part_type, sim.pt, (vx, vy, wz), v0, heat,
                           contact_arrays)
     assert scaled > 0      # the limit is exercised

@@ -15,9 +15,10 @@ Gauss-Seidel) in the arrangement of Box2D v3's solver, per substep:
    exactly within the substep), the accumulated tangential impulse clamped to the Coulomb cone
    ``mu(|u_t|)`` times the normal one (Horváth et al.'s speed-dependent coefficient); until no
    increment changes a relative speed by more than a tolerance, at most a fixed number;
-3. :func:`~.restitution.restitute`: restitution in a pass of its own, from the approach speeds
-   stored before the solve, so contacts that happen at once all keep it, and Poisson's impulse
-   for contacts whose approach arose within the substep;
+3. :func:`~.restitution.restitute`: restitution in a pass of its own: Poisson's, on their
+   compression swept to convergence, for the new impacts of islands neither held from the
+   substep before nor driven by an actuator (so impacts that happen at once keep their
+   energy), elsewhere the bounce from the approach speeds stored before the solve;
 4. :func:`~.energy.limit_energy`: no island gains more kinetic energy than the external work.
 
 What holds, to round-off, in every sweep: total linear and angular momentum (each impulse has
