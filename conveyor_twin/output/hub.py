@@ -64,17 +64,6 @@ class TwinOutput:
         with self._lock:
             self._set(tuple(s for s in self._sinks if s is not sink))
 
-    def reroute(self, sinks: Sequence[FrameSink], relay: FrameSink) -> None:
-        """Replace the subscribed ``sinks`` by ``relay`` (which hands them the frames), at the
-        position of the first of them. Safe while the twin steps: from the next step on."""
-        with self._lock:
-            current = list(self._sinks)
-            positions = [i for i, s in enumerate(current) if any(s is t for t in sinks)]
-            if len(positions) != len(sinks):
-                raise ValueError('reroute: every sink must be subscribed once')
-            current[positions[0]] = relay
-            self._set(tuple(s for i, s in enumerate(current) if i not in positions[1:]))
-
     def _set(self, sinks: Tuple[Any, ...]) -> None:
         self._sinks = sinks
         on_message = tuple(s.on_message for s in sinks if hasattr(s, 'on_message'))

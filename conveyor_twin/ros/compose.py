@@ -12,8 +12,6 @@ from typing import Dict, Optional
 
 from rclpy.context import Context
 
-from conveyor_twin import contract
-
 from conveyor_twin.cell.model import Cell
 from conveyor_twin.coord.assembly import build_twin
 from conveyor_twin.coord.runner import (raise_thread_priority, raise_threads,
@@ -21,11 +19,8 @@ from conveyor_twin.coord.runner import (raise_thread_priority, raise_threads,
 from conveyor_twin.coord.timing import TimeMode
 from conveyor_twin.faults.scenario import Scenario
 from conveyor_twin.health import Health
-from conveyor_twin.contract import DIAGNOSTICS_PERIOD_STEPS
-from conveyor_twin.output.frame import Frame
 from conveyor_twin.output.hub import TwinOutput
 from conveyor_twin.output.producers import CoordinatorOutput, MacroOutput, MicroOutput
-from conveyor_twin.output.relay import FrameRelay
 from conveyor_twin.plc.attach import attach_plc
 from conveyor_twin.plc.options import PlcOptions
 from conveyor_twin.ros.coordinator_node import CoordinatorNode
@@ -41,11 +36,6 @@ from conveyor_twin.viz.foxglove_view import DEFAULT_STREAM_RATE, FoxgloveView
 
 #: Name of the executor thread (and of its failure in the twin's health).
 EXECUTOR = 'executor thread'
-#: Name of the thread that publishes the frames' streams in realtime (and of its failure).
-PUBLISHER = 'publisher thread'
-#: How often the publisher thread looks whether a step waits for it while it waits for the
-#: twin's lock [s].
-LOCK_POLL = 0.002
 
 
 class ComposedTwin:
@@ -93,11 +83,9 @@ class ComposedTwin:
             duration=max_steps * cell.settings.step if max_steps else 0.0, foxglove=foxglove,
             scenario=scenario.source_file if scenario is not None else '')
         #: One frame per step of every stream (the nodes, the recorder and other sinks take it).
-        # in realtime the diagnostics are built off the step (see :meth:`_diagnostics_off_step`)
-        on_step_diagnostics = (None if mode is TimeMode.REALTIME
-                               else lambda t: self.coordinator.diagnostics_cdr(t))
         self.output = TwinOutput([
-            CoordinatorOutput(self.twin, diagnostics=on_step_diagnostics),
+            CoordinatorOutput(self.twin,
+                              diagnostics=lambda t: self.coordinator.diagnostics_cdr(t)),
             MicroOutput(self.micro_stage), MacroOutput(self.macro_stage)])
         self.output.health = self.health
         common = dict(context=context, namespace=namespace, markers_rate=markers_rate,
@@ -114,18 +102,8 @@ class ComposedTwin:
         #: The ``simulation_interfaces`` server (docs/simulation_interfaces.md; None if that
         #: package is not installed).
         self.sim_interfaces = attach_sim_interfaces(self, namespace)
-        #: In realtime, the thread that publishes the three nodes' streams of every frame while
-        #: the stepping thread sleeps (None in fast and lockstep: published on the step, so a
-        #: ``step`` call returns with its messages sent).
-        self.publisher: Optional[FrameRelay] = None
         if mode is TimeMode.REALTIME:
             self.micro_node.markers_priority = realtime_priority(helper=True)
-            streams = [n.streams for n in (self.coordinator, self.micro_node, self.macro_node)]
-            self.publisher = FrameRelay(
-                streams, name=PUBLISHER, health=self.health,
-                on_start=lambda: raise_thread_priority(realtime_priority(helper=True)),
-                after=self._diagnostics_off_step)
-            self.output.reroute(streams, self.publisher)
         self.executor = make_executor(context)
         for node in (self.coordinator, self.micro_node, self.macro_node):
             self.executor.add_node(node)
@@ -146,29 +124,6 @@ class ComposedTwin:
             except BaseException:
                 self.stop()
                 raise
-
-    def _diagnostics_off_step(self, frame: Frame) -> None:
-        """In realtime, after a frame due for diagnostics is published: build them on the
-        publisher thread under the twin's lock (the state between two steps, stamped with its
-        time), publish them and hand them to the output's other sinks (a recorder, a view).
-
-        On the stepping thread they cost 0.1-0.5 ms once a second (the statuses' Python with
-        cold caches): a step with them was late whenever it started a little late.
-        """
-        if frame.step % DIAGNOSTICS_PERIOD_STEPS:
-            return
-        lock = self.twin.lock
-        locked = lock.acquire(timeout=LOCK_POLL)
-        while not locked and not self.publisher.step_waiting:
-            locked = lock.acquire(timeout=LOCK_POLL)
-        try:  # not locked: the step holds the lock, done, and waits for this thread
-            time_ns = self.twin.time_ns
-            data = self.coordinator.diagnostics_cdr(time_ns)
-        finally:
-            if locked:
-                lock.release()
-        self.coordinator.diag_pub.publish(data)
-        self.output.emit(contract.DIAGNOSTICS, data, time_ns)
 
     def counters(self) -> Dict[str, float]:
         """Part balance per scale: entered, left through sinks, in flight."""
@@ -206,8 +161,6 @@ class ComposedTwin:
         message with the ERROR status naming it (and hands it to the sinks, e.g. a recorder).
         """
         self.runner.stop()
-        if self.publisher is not None:  # every stepped frame out before the nodes go
-            self.publisher.close()
         if self.health.failed and not self._final_diagnostics:
             self._final_diagnostics = True
             try:

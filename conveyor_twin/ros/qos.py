@@ -51,9 +51,8 @@ class RawPublisher:
     in another process has not taken the older ones (measured here: 101 of 6000 back-to-back
     1000-part messages), and one such subscriber must not stop the simulation.
 
-    Only for the per-step streams (published by the stepping thread, or in realtime by the
-    composed twin's publisher thread): the nodes are destroyed only after both have stopped,
-    which is what rclpy's handle guard protects against.
+    Only for the stepping thread's streams: the nodes are destroyed only after the stepping
+    has stopped, which is what rclpy's handle guard protects against.
     """
 
     __slots__ = ('publisher', 'send', 'failures', '_logger')

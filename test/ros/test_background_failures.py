@@ -30,7 +30,7 @@ from conveyor_twin.health import EXIT_BACKGROUND_FAILURE
 from conveyor_twin.output.queued import QueuedSink
 from conveyor_twin.record import reader
 from conveyor_twin.record.writer import WRITER_NAME
-from conveyor_twin.ros.compose import ComposedTwin, EXECUTOR, PUBLISHER
+from conveyor_twin.ros.compose import ComposedTwin, EXECUTOR
 from conveyor_twin.ros.coordinator_node import CoordinatorNode, HEALTH_STATUS
 from conveyor_twin.ros.endpoints import create_subscription
 from conveyor_twin.ros.micro_node import MARKERS_THREAD
@@ -159,29 +159,6 @@ def test_a_failing_recorder_writer_ends_the_run(tmp_path, monkeypatch, capfd, in
     summary, _ = _check_run(code, capfd, WRITER_NAME, 'No space left on device')
     assert 'No space left on device' in summary['recording']['error']
     assert_error_names(final_diagnostics[-1], WRITER_NAME)
-
-
-def test_a_failing_publisher_thread_ends_a_realtime_run(tmp_path, monkeypatch, capfd,
-                                                        in_process_run, final_diagnostics):
-    from conveyor_twin.ros.stream_publisher import StreamPublisher
-    on_frame = StreamPublisher.on_frame
-
-    def broken(self, frame):
-        if frame.step == 2500:
-            raise BufferError('publish injected')
-        on_frame(self, frame)
-
-    monkeypatch.setattr(StreamPublisher, 'on_frame', broken)
-    path = tmp_path / 'run.mcap'
-    code = in_process_run('--mode', 'realtime', '--duration', LONG, '--record', str(path),
-                          '--markers-rate', '0')
-    summary, _ = _check_run(code, capfd, PUBLISHER, 'publish injected')
-    assert summary['steps'] < 600_000  # stopped by the failure, not by the duration
-    assert_error_names(final_diagnostics[-1], PUBLISHER)
-    assert reader.info(str(path))['complete']
-    recorded = _recorded_diagnostics(path)  # built off the step in realtime, recorded too
-    assert health_status(recorded[0]).level == DiagnosticStatus.OK
-    assert_error_names(recorded[-1], PUBLISHER)
 
 
 class Capture:
