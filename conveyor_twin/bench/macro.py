@@ -18,9 +18,9 @@ operator adds ~30-140 us as the jam grows (100-2600 full cells). The y sweep wor
 with a y velocity and the operator's faces, the x cut only on faces whose cut condition holds,
 the collision operator only within r + 1 cells of full cells.
 
-Ratios NumPy / numba in the same run (``conveyor-twin bench macro``, load 2.6-2.8): free
-capped upwind 4.8x, capped upwind in the jam 3.7x, Göttlich upwind in the jam 1.75x (NumPy's
-step has no cap, no operator and no bookkeeping).
+Ratios NumPy / numba in the same run (``conveyor-twin bench macro``, 400 x 100, medians of
+three runs, load 2-3): free capped upwind 4.7x, capped upwind in the jam 3.9x, Göttlich upwind
+in the jam 1.9x (NumPy's step has no cap, no operator and no bookkeeping).
 
 The PyClaw peer needs clawpack, whose Fortran kernels are built at install time: install a
 Fortran compiler, then clawpack into the environment (Debian/Ubuntu:

@@ -21,7 +21,8 @@ from numba import njit
 
 from conveyor_twin.micro.contacts.tables import A_BELT, MP_DT, MP_FLOOR_MU, MP_GRAVITY, MP_TRACK
 from conveyor_twin.micro.footprint import footprint_factors, RADIUS_PER_SPIN_ARM
-from conveyor_twin.micro.surfaces import belt_surface, prepare_rotations, surface_under
+from conveyor_twin.micro.surfaces import (all_straight, belt_surface, prepare_rotations,
+                                          straight_belt_surface, surface_under)
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_MASS, PT_SPIN_ARM
 
 # Friction coefficient between a part and the fixed floor beside the belts.
@@ -74,15 +75,19 @@ def belt_drive(n, ptype, x, y, vx, vy, wz, pt, surfaces, speed, mp, acc, heat):
     """
     belts = surfaces[0]
     plain = surfaces[1].shape[0] == 0                   # no transfer units
+    straight = plain and all_straight(belts)            # nor curved belts
     ft = surfaces[3]
     h = mp[MP_DT]
-    prepare_rotations(belts, speed, h)
+    if not straight:
+        prepare_rotations(belts, speed, h)
     g_dt = mp[MP_GRAVITY] * h
     floor_mu = mp[MP_FLOOR_MU]
     track = mp[MP_TRACK] != 0.0
     for i in range(n):
         t = ptype[i]
-        if plain:
+        if straight:
+            bvx, bvy, bw, mu = straight_belt_surface(belts, speed, x[i], y[i], floor_mu)
+        elif plain:
             bvx, bvy, bw, mu = belt_surface(belts, speed, x[i], y[i], floor_mu, h)
         else:
             bvx, bvy, bw, mu = surface_under(surfaces, speed, x[i], y[i], floor_mu, h)
