@@ -20,11 +20,11 @@ The reference (:mod:`conveyor_twin.bench.clog_reference`) is pymunk at 100 itera
 iterations and at 0.25 ms steps as well.
 
 Measured (defaults, 20 seeds; the table is in docs/validation.md, "Clogging at a bottleneck"):
-the twin agrees with the reference in 5 of the 10 cases (1.5, 3 and 4 d at the deflector, 3
-and 4 d in the funnel); at 2 and 2.5 d it clogs more often or passes more (deflector 17 and 9
-of 20 runs against 11 and 6, passed 39 % and 74 % against 22 % and 59 %; funnel 20 and 18
-against 3 and 1). The twin's 200 runs take 1.8 min of CPU, a reference
-run about ten times a twin run's CPU.
+the twin agrees with the reference in 4 of the 10 cases (1.5, 3 and 4 d at the deflector, 4 d
+in the funnel); at 2 and 2.5 d it clogs more often or passes more (deflector 20 and 10 of 20
+runs against 11 and 6, passed 25 % and 70 % against 22 % and 59 %; funnel 20 and 19 against 3
+and 1), and in the funnel at 3 d it stops 3 of 20 runs against none. The twin's 200 runs take
+about 3 min in one process, a reference run about ten times a twin run's CPU.
 """
 
 import argparse
