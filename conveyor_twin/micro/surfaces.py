@@ -112,6 +112,17 @@ def transfer_table(actuators: Sequence[Actuator]) -> np.ndarray:
 
 
 @njit(cache=True, inline='always')
+def _on_straight(belts, b, px, py):
+    rx = px - belts[b, BT_SX]
+    ry = py - belts[b, BT_SY]
+    dx = belts[b, BT_DX]
+    dy = belts[b, BT_DY]
+    u = rx * dx + ry * dy
+    w = ry * dx - rx * dy
+    return 0.0 <= u <= belts[b, BT_LENGTH] and abs(w) <= belts[b, BT_HALF_WIDTH]
+
+
+@njit(cache=True, inline='always')
 def _on_curve(belts, b, px, py):
     rx = px - belts[b, BT_CX]
     ry = py - belts[b, BT_CY]
@@ -149,13 +160,7 @@ def belt_under(belts, px, py):
             if _on_curve(belts, b, px, py):
                 return b
             continue
-        rx = px - belts[b, BT_SX]
-        ry = py - belts[b, BT_SY]
-        dx = belts[b, BT_DX]
-        dy = belts[b, BT_DY]
-        u = rx * dx + ry * dy
-        w = ry * dx - rx * dy
-        if 0.0 <= u <= belts[b, BT_LENGTH] and abs(w) <= belts[b, BT_HALF_WIDTH]:
+        if _on_straight(belts, b, px, py):
             return b
     return -1
 
@@ -194,14 +199,9 @@ def straight_belt_surface(belts, speed, px, py, floor_mu):
     same operations without the tests for curves, so a straight-only cell steps as fast as
     before curves existed."""
     for b in range(belts.shape[0]):
-        rx = px - belts[b, BT_SX]
-        ry = py - belts[b, BT_SY]
-        dx = belts[b, BT_DX]
-        dy = belts[b, BT_DY]
-        u = rx * dx + ry * dy
-        w = ry * dx - rx * dy
-        if 0.0 <= u <= belts[b, BT_LENGTH] and abs(w) <= belts[b, BT_HALF_WIDTH]:
-            return speed[b] * dx, speed[b] * dy, 0.0, belts[b, BT_MU]
+        if _on_straight(belts, b, px, py):
+            return (speed[b] * belts[b, BT_DX], speed[b] * belts[b, BT_DY], 0.0,
+                    belts[b, BT_MU])
     return 0.0, 0.0, 0.0, floor_mu
 
 
