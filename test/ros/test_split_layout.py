@@ -16,6 +16,7 @@ from conveyor_twin.split.launch import launch, ros_args
 from conveyor_twin.wire import cdr
 from test.ros.test_node_parameters import check_parameters as check_node_parameters, NODES
 from conveyor_twin.testing import Driver
+from conveyor_twin.testing.errors import TwinTimeoutError
 
 pytestmark = pytest.mark.ros
 SEED = 7
@@ -87,8 +88,11 @@ def run_split(context, ros_processes, tmp_path, tag: str, check_parameters: bool
                     name='probe_' + tag)
     try:
         assert driver.wait_connected(), 'split twin not discovered\n' + _logs(tmp_path)
-        driver.run(SEQUENCE)
-        _reset_and_step(driver, after_reset)
+        try:
+            driver.run(SEQUENCE)
+            _reset_and_step(driver, after_reset)
+        except TwinTimeoutError as exc:  # what the three processes said, with the timeout
+            raise AssertionError(f'{exc}\n{_logs(tmp_path)}') from exc
         if check_parameters:  # each process's real node declares the parameters
             for node in NODES:
                 check_node_parameters(driver, node, seed=SEED, mode='lockstep',
