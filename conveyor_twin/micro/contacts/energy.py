@@ -18,12 +18,18 @@ from conveyor_twin.micro.state import PT_INERTIA, PT_MASS
 
 
 @njit(cache=True, inline='always')
-def _root(parent, i):
-    """Return the representative of ``i``'s island (union-find with path halving)."""
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
+def island_root(parent, i):
+    """Return the representative of part ``i``'s island (union-find with path halving); a
+    representative may be marked by holding ``-1 - itself`` (the restitution's held islands).
+    """
+    while True:
+        p = parent[i]
+        if p == i or p < 0:
+            return i
+        g = parent[p]
+        if g >= 0:
+            parent[i] = g
+        i = p
 
 
 @njit(cache=True, inline='always')
@@ -106,8 +112,8 @@ def limit_energy(n, nc, ptype, pt, v, v0, heat, contacts):
     for c in range(nc):
         b = cidx[c, 1]
         if b >= 0:
-            ra = _root(parent, cidx[c, 0])
-            rb = _root(parent, b)
+            ra = island_root(parent, cidx[c, 0])
+            rb = island_root(parent, b)
             if ra != rb:
                 # the smaller index represents (deterministic, independent of other islands)
                 if ra < rb:
@@ -117,7 +123,7 @@ def limit_energy(n, nc, ptype, pt, v, v0, heat, contacts):
     # sums per island, on its representative (the work was summed per part above)
     for i in range(n):
         g, q = _energy_change(i, ptype, pt, vx, vy, wz, v0x, v0y, w0)
-        r = _root(parent, i)
+        r = island_root(parent, i)
         parent[i] = r
         acc3[0, r] += g
         acc3[1, r] += q

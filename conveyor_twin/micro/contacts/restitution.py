@@ -40,6 +40,7 @@ impact within the substep starts from a contact that approached before it, so th
 
 from numba import njit
 
+from conveyor_twin.micro.contacts.energy import island_root
 from conveyor_twin.micro.contacts.tables import (CT_BOUNCE, CT_BVX, CT_BVY, CT_BW, CT_CNT,
                                                  CT_E, CT_IKN, CT_IKT, CT_KN, CT_LN, CT_LN0,
                                                  CT_LT, CT_MU_K, CT_MU_S, CT_NX, CT_NY, CT_RAX,
@@ -199,24 +200,10 @@ def _impact(c, ct):
             and (ct[c, CT_BOUNCE] > 0.0 or p * ct[c, CT_KN] > RESTITUTION_THRESHOLD)), p
 
 
-@njit(cache=True, inline='always')
-def _root(parent, i):
-    """Return the representative of part ``i``'s island; a held island's representative
-    holds ``-1 - itself`` (union-find with path halving)."""
-    while True:
-        p = parent[i]
-        if p == i or p < 0:
-            return i
-        g = parent[p]
-        if g >= 0:
-            parent[i] = g
-        i = p
-
-
 @njit(cache=True)
 def _islands(visits, pairs, half, ct, cidx, parent):
     """Join the parts of the contacts that carry an impulse into islands in ``parent`` (read
-    with :func:`_root`) and mark the held ones (see the module docstring)."""
+    with :func:`~.energy.island_root`) and mark the held ones (see the module docstring)."""
     for k in range(visits):
         c = sweep_contact(k, pairs, half)
         if c >= 0 and ct[c, CT_LN] > 0.0:
@@ -225,15 +212,15 @@ def _islands(visits, pairs, half, ct, cidx, parent):
                 parent[cidx[c, 1]] = cidx[c, 1]
     for c in range(pairs):
         if ct[c, CT_LN] > 0.0:
-            ra = _root(parent, cidx[c, 0])
-            rb = _root(parent, cidx[c, 1])
+            ra = island_root(parent, cidx[c, 0])
+            rb = island_root(parent, cidx[c, 1])
             if ra != rb:
                 parent[max(ra, rb)] = min(ra, rb)
     for k in range(visits):
         c = sweep_contact(k, pairs, half)
         if c >= 0 and ct[c, CT_LN] > 0.0 and (ct[c, CT_LN0] != 0.0 or (cidx[c, 1] < 0 and (
                 ct[c, CT_BVX] != 0.0 or ct[c, CT_BVY] != 0.0 or ct[c, CT_BW] != 0.0))):
-            r = _root(parent, cidx[c, 0])
+            r = island_root(parent, cidx[c, 0])
             parent[r] = -1 - r
 
 
@@ -308,7 +295,7 @@ def restitute(nc, ct, cidx, ptype, vx, vy, wz, pt, mp, order, prev):
         impact, p = _impact(c, ct)
         if not impact:
             continue
-        if order[_root(order, cidx[c, 0])] >= 0:
+        if order[island_root(order, cidx[c, 0])] >= 0:
             ct[c, CT_BOUNCE] = _IMPACT
         elif ct[c, CT_BOUNCE] == 0.0:
             _kick(c, ct, cidx, ptype, vx, vy, wz, pt, ct[c, CT_E] * p)
