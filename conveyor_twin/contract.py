@@ -263,6 +263,12 @@ PLANT: Dict[str, Topic] = {t.name: t for t in (PART_TRANSFER, TRANSFER_ACCEPTED,
                                                PLANT_DIAGNOSTICS)}
 
 
+def plant_cell_node(cell: str) -> str:
+    """Return the name of a plant cell's node (in the plant's namespace; it publishes the
+    cell's ``progress`` and its links' batches)."""
+    return f'plant_{cell}'
+
+
 def link_topic(topic: Topic, plant_namespace: str, link: str) -> str:
     """Return the absolute name of a link's topic (``/<plant namespace>/links/<link>/...``)."""
     return '/' + plant_namespace.strip('/') + '/' + topic.name.format(link=link)

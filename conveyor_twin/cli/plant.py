@@ -18,7 +18,7 @@ import os
 import signal
 import sys
 import time
-from typing import List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from conveyor_twin.cell.errors import CellError
 from conveyor_twin.coord.timing import TimeMode
@@ -32,6 +32,8 @@ FINISH_TIMEOUT = 60.0
 #: With a cell dead for good, a run of fixed duration ends once no other cell has stepped for
 #: this long (the cells that depend on the dead one wait for it forever) [s of wall time].
 STALLED_AFTER = 10.0
+#: A cell whose node has been out of the ROS graph this long, not done, is said to be gone [s].
+GONE_AFTER = 3.0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -224,6 +226,7 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
                                   health=health, restarts=args.restart_dead)
             cells.start()
         last = 0.0
+        gone: Dict[Tuple[str, int], float] = {}
         moved_at, seen = time.monotonic(), monitor.simulated_steps()
         while not stop:
             executor.spin_once(timeout_sec=0.05)
@@ -231,6 +234,8 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
             if now - last >= 1.0:
                 last = now
                 monitor.publish_diagnostics()
+                if args.monitor:
+                    _warn_gone(monitor, gone, now)
                 if not args.quiet:
                     print(_progress_line(now - t0, monitor, plant.step,
                                          cells.dead if cells else ()),
@@ -297,6 +302,20 @@ def run_plant(plant: Plant, args: argparse.Namespace) -> int:
         return EXIT_BACKGROUND_FAILURE
     complete = bool(end) and monitor.all_done()
     return 0 if complete or (not end and stop) else 1
+
+
+def _warn_gone(monitor, gone: Dict[Tuple[str, int], float], now: float) -> None:
+    """Say once per cell run that its process left before its ``done`` report arrived (gone
+    for :data:`GONE_AFTER` s); ``gone`` maps (cell, run) to when it was first missed (a
+    negative time: said)."""
+    for name in monitor.gone_unfinished():
+        report = monitor.reports[name]
+        since = gone.setdefault((name, report.run), now)
+        if 0.0 <= since <= now - GONE_AFTER:
+            gone[(name, report.run)] = -1.0
+            print(f'conveyor-twin plant: cell {name!r} (run {report.run}) left at step '
+                  f'{report.step} before its done report arrived; waiting for it to run again',
+                  file=sys.stderr, flush=True)
 
 
 def _start_discovery_server(args: argparse.Namespace, health: Health):

@@ -30,6 +30,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.context import Context
+from rclpy.duration import Duration
 from rclpy.node import Node
 
 from conveyor_twin import contract
@@ -53,6 +54,9 @@ PROGRESS_PERIOD = 0.2
 #: After its last step, a cell waits for the final batch of each exit's entry cell; an entry
 #: cell with no publisher on the link for this long is gone, and the link keeps its parts [s].
 PEER_GONE_AFTER = 3.0
+#: Longest wait, when a cell stops, for every subscriber to acknowledge its last reports and
+#: batches [s] (a lost datagram is sent again within a heartbeat period, well under this).
+DELIVER_TIMEOUT = 3.0
 
 
 def record_cell(composed: Any, plant: Plant, name: str, folder: str, mode: TimeMode) -> Any:
@@ -155,7 +159,7 @@ class PlantCellNode:
         self.error: Optional[BaseException] = None
         self.reports: Dict[str, 'CellProgress'] = {}
         ns = '/' + plant.namespace
-        self.node = Node(f'plant_{name}', namespace=ns, context=context)
+        self.node = Node(contract.plant_cell_node(name), namespace=ns, context=context)
         qos = to_rclpy(contract.PLANT_QOS)
         self._dep_pub = {x.link.name: self.node.create_publisher(
             PartTransfer, contract.link_topic(contract.PART_TRANSFER, ns, x.link.name), qos)
@@ -369,13 +373,33 @@ class PlantCellNode:
         stepper.start()
         self._threads.append(stepper)
 
+    def deliver(self, timeout: float = DELIVER_TIMEOUT) -> bool:
+        """Wait until every matched subscriber acknowledged what this cell published (its
+        last report and batches), at most ``timeout`` [s]; False if one did not.
+
+        A cell that ends right after its one ``done`` report (the last cell to finish) would
+        otherwise leave a subscriber whose datagram was lost waiting for that report forever:
+        a writer that is gone sends nothing again."""
+        deadline = time.monotonic() + timeout
+        publishers = [self._progress_pub, *self._dep_pub.values(), *self._acc_pub.values()]
+        for pub in publishers:
+            left = max(0.0, deadline - time.monotonic())
+            if not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+                return False
+        return True
+
     def stop(self) -> None:
-        """Stop stepping and serving; destroy the nodes."""
+        """Stop stepping and serving (after the subscribers acknowledged the cell's last
+        reports and batches, :meth:`deliver`); destroy the nodes."""
         self._stop.set()
         self.stepper.request_stop()
         self._wake.set()
         for t in self._threads:
             t.join(5.0)
+        if not self.deliver():
+            self.node.get_logger().warning(
+                f'a subscriber did not acknowledge the last reports of cell {self.name!r} '
+                f'within {DELIVER_TIMEOUT:g} s (gone, or too slow)')
         if self.composed is not None:
             self.composed.stop()
         else:

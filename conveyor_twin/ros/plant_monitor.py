@@ -87,6 +87,16 @@ class PlantMonitor:
             counts[m.cell] = counts.get(m.cell, 0) + 1
         return counts
 
+    def gone_unfinished(self) -> List[str]:
+        """Return the cells that reported, are not done, and whose node is not in the ROS
+        graph (it publishes no ``progress``): a cell process that ended or died before its
+        ``done`` report reached the monitor (for cells in processes of their own)."""
+        topic = self._sub.topic_name
+        present = {i.node_name for i in self.node.get_publishers_info_by_topic(topic)}
+        return [c.name for c in self.plant.cells
+                if c.name in self.reports and not self.reports[c.name].done
+                and contract.plant_cell_node(c.name) not in present]
+
     def all_done(self) -> bool:
         """True once every cell reported it completed the end step."""
         return all(c.name in self.reports and self.reports[c.name].done

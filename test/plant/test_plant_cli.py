@@ -127,3 +127,31 @@ def test_a_negative_restart_count_is_refused():
                           text=True, timeout=120)
     assert proc.returncode == 2 and proc.stdout == ''
     assert '--restart-dead: got -1; expected an integer >= 0' in proc.stderr
+
+
+def test_the_monitor_says_once_per_run_that_a_cell_left_before_its_done_report(capsys):
+    from types import SimpleNamespace
+
+    from conveyor_twin.cli.plant import _warn_gone, GONE_AFTER
+
+    class Monitor:
+        gone: List[str] = []
+        reports = {'second': SimpleNamespace(run=1, step=812)}
+
+        def gone_unfinished(self) -> List[str]:
+            return list(self.gone)
+    monitor, said = Monitor(), {}
+    _warn_gone(monitor, said, 10.0)                 # present: nothing to say
+    monitor.gone = ['second']
+    _warn_gone(monitor, said, 11.0)                 # missed from now on
+    _warn_gone(monitor, said, 11.0 + GONE_AFTER / 2)
+    assert capsys.readouterr().err == ''
+    for t in (11.0 + GONE_AFTER, 30.0, 60.0):      # gone long enough: said once
+        _warn_gone(monitor, said, t)
+    assert capsys.readouterr().err == (
+        "conveyor-twin plant: cell 'second' (run 1) left at step 812 before its done report "
+        "arrived; waiting for it to run again\n")
+    monitor.reports['second'] = SimpleNamespace(run=2, step=40)   # restarted, gone again
+    _warn_gone(monitor, said, 70.0)
+    _warn_gone(monitor, said, 70.0 + GONE_AFTER)
+    assert "cell 'second' (run 2) left at step 40" in capsys.readouterr().err

@@ -8,8 +8,10 @@ server variant also ``tc`` with htb and u32); skipped where the machine does not
 
 import json
 from pathlib import Path
+import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 
@@ -22,6 +24,7 @@ ROOT = Path(__file__).resolve().parents[2]
 CHAIN = ROOT / 'test' / 'resources' / 'plant' / 'chain.yaml'
 STEPS = 1500
 TIMEOUT = 300.0   # s, a bound for a loaded machine
+STOP_GRACE = 30.0  # s, for the processes to print their summaries after SIGTERM
 SERVER = '10.77.0.1:11811'
 
 # Runs inside `unshare -rn`: this namespace holds feeder and first (10.77.0.1), a second one
@@ -133,8 +136,27 @@ def run_in_namespaces(ros_processes, tmp_path: Path, script: str) -> None:
     proc = ros_processes.start(['unshare', '-rn', '--fork', 'bash', str(path)],
                                cwd=str(ROOT), stdout=subprocess.PIPE,
                                stderr=subprocess.STDOUT, text=True)
-    out, _ = proc.communicate(timeout=TIMEOUT)
-    assert proc.returncode == 0, out
+    try:
+        out, _ = proc.communicate(timeout=TIMEOUT)
+    except subprocess.TimeoutExpired:  # end it as a user would; show what each process said
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            out, _ = proc.communicate(timeout=STOP_GRACE)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            out, _ = proc.communicate()
+        pytest.fail(f'the plant did not end within {TIMEOUT:.0f} s; ended with SIGTERM\n'
+                    f'{out}\n{_outputs(tmp_path)}')
+    assert proc.returncode == 0, f'{out}\n{_outputs(tmp_path)}'
+
+
+def _outputs(tmp_path: Path) -> str:
+    """The end of every file the processes wrote (their summaries and error output)."""
+    parts = []
+    for f in sorted(tmp_path.iterdir()):
+        if f.suffix in ('.json', '.err', '.txt'):
+            parts.append(f'--- {f.name}:\n{f.read_text(errors="replace")[-4000:]}')
+    return '\n'.join(parts)
 
 
 def assert_bits_of_one_process(tmp_path: Path) -> None:

@@ -134,9 +134,13 @@ def test_a_killed_cell_leaves_its_parts_in_the_link_and_a_restart_gets_them(
         held = plant.link()
         assert held.held >= 5 and held.sent - held.inserted == held.held
         assert monitor.reports['first'].step == end and not monitor.reports['first'].done
+        # the monitor tells the killed cell from the one that waits for it: its node left
+        # the graph before its done report came
+        plant.wait(lambda: monitor.gone_unfinished() == ['second'])
         # realtime: the new run inserts the held parts over seconds, not before this test's
         # subscriber has discovered its publisher
         plant.start('second', 2, 'realtime')
+        plant.wait(lambda: monitor.gone_unfinished() == [])
         plant.finish()
     finally:
         plant.close()
