@@ -56,6 +56,34 @@ def test_paced_floor_counts_an_impossible_period_as_overruns():
     assert result['policy'] == 'normal'
 
 
+def test_the_floor_loop_can_work_a_calibrated_time_per_step():
+    import pytest
+
+    from conveyor_twin.bench.host import paced_floor
+    result = paced_floor(0.2, work_ns=300_000)
+    # whole passes over the array, calibrated to the nearest pass of the time asked for
+    assert result['steps'] == 200 and result['work_passes'] >= 1
+    assert 150_000 <= result['work_ns'] <= 450_000
+    assert 0 <= result['slow_work'] <= result['steps']
+    assert paced_floor(0.01)['work_passes'] == 0
+    with pytest.raises(RuntimeError, match='WORK_NS in'):   # no step can hold a whole period
+        paced_floor(0.01, work_ns=1_000_000)
+
+
+def test_twin_overruns_as_a_ratio_to_the_working_floor():
+    from conveyor_twin.bench.twin import compare_to_floor
+    before = {'overruns': 2, 'duration_s': 30.0, 'working': {
+        'overruns': 10, 'duration_s': 30.0, 'work_ns': 300_000}}
+    after = {'overruns': 4, 'duration_s': 30.0, 'working': {
+        'overruns': 14, 'duration_s': 30.0, 'work_ns': 300_000}}
+    figures = {'overruns_in_window': 48, 'window_s': 60.0}
+    compare_to_floor(figures, before, after)
+    assert figures['overruns_vs_floor'] == 8.0
+    assert figures['floor']['working_overruns_per_min'] == 24.0
+    assert figures['floor']['working_work_ms'] == 0.3
+    assert figures['overruns_vs_working_floor'] == 2.0
+
+
 def test_twin_overruns_as_a_ratio_to_the_floor():
     from conveyor_twin.bench.twin import compare_to_floor
     before = {'overruns': 2, 'duration_s': 30.0}

@@ -10,6 +10,12 @@ virtual machine) the hypervisor did not give it, which no 1 kHz loop on the mach
 ``bench twin`` reports the twin's overruns as a ratio to this floor, measured in windows
 interleaved with the twin's.
 
+``--work-ms W ...`` runs the same loop doing W ms of computation per step (passes over a
+128 kB array, calibrated to take W ms at the median before the loop), one loop per value, their
+windows interleaved: the overruns of a loop that works as long as the twin's step, which on a
+virtual machine include the times its CPU runs slower than usual (a loop doing no work never
+notices those).
+
 ``--loop busy`` measures the older figure instead: a thread that reads the monotonic clock in a
 loop and never sleeps, counting the clock's jumps over 1 ms. Linux throttles real-time threads
 that never sleep (by default to 95 % of each second: one ~50 ms gap per second) and
@@ -110,21 +116,24 @@ def floor_program() -> str:
     return str(binary)
 
 
-def paced_floor(seconds: float, *, period_ns: int = STEP_NS,
-                priority: int = FLOOR_PRIORITY) -> Dict[str, object]:
+def paced_floor(seconds: float, *, period_ns: int = STEP_NS, priority: int = FLOOR_PRIORITY,
+                work_ns: int = 0) -> Dict[str, object]:
     """Run the paced floor loop for ``seconds``; return its figures.
 
     :param seconds: length of the window [s].
     :param period_ns: step period [ns].
     :param priority: SCHED_FIFO priority (0: normal scheduling).
+    :param work_ns: computation per step, calibrated to take this long at the median [ns]
+        (0: none, the floor).
     :return: ``steps``, ``overruns``, ``max_lateness_ns``, ``late_wakes``, ``policy``,
+        ``work_ns`` (as calibrated), ``slow_work`` (steps whose work took over 1.5 times that),
         ``duration_s``, ``steal_percent`` (CPU the hypervisor gave to others meanwhile).
     :raises RuntimeError: if the loop cannot be built or fails.
     """
     program = floor_program()
     before = cpu_times()
-    done = subprocess.run([program, repr(float(seconds)), str(int(period_ns)), str(priority)],
-                          capture_output=True, text=True)
+    done = subprocess.run([program, repr(float(seconds)), str(int(period_ns)), str(priority),
+                           str(int(work_ns))], capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f'bench host: the floor loop failed: {done.stderr.strip()}')
     result = json.loads(done.stdout)
@@ -134,24 +143,36 @@ def paced_floor(seconds: float, *, period_ns: int = STEP_NS,
 
 
 def _main_paced(args: argparse.Namespace) -> int:
-    windows = [paced_floor(args.duration / args.windows) for _ in range(args.windows)]
-    overruns = [int(w['overruns']) for w in windows]
+    works = [int(round(ms * 1e6)) for ms in args.work_ms]
+    seconds = args.duration / args.windows
+    # the windows of every amount of work interleave: window 1 of each, then window 2, ...
+    windows = [dict(paced_floor(seconds, work_ns=w), work_requested_ns=w)
+               for _ in range(args.windows) for w in works]
     result: Dict[str, object] = {'loop': 'paced', 'duration_s': args.duration,
                                  'policy': windows[0]['policy'], 'windows': windows,
-                                 'overruns': sum(overruns),
+                                 'overruns': {f'{ms:g} ms': sum(
+                                     int(w['overruns']) for w in windows
+                                     if w['work_requested_ns'] == v)
+                                     for ms, v in zip(args.work_ms, works)},
                                  'load_average': os.getloadavg()[0]}
     if args.json:
         print(json.dumps(result))
         return 0
     print(f"paced 1 kHz floor loop ({windows[0]['policy']}, CPU wake-up latency request "
-          f"{windows[0].get('latency_request')}), {args.windows} windows of "
-          f"{args.duration / args.windows:g} s; load {result['load_average']:.2f}")
-    for w in windows:
-        print(f"  overruns {w['overruns']:>5} of {w['steps']} steps, max lateness "
-              f"{w['max_lateness_ns'] * 1e-6:.3f} ms, late wake-ups {w['late_wakes']}, CPU "
-              f"stolen by the hypervisor {w['steal_percent']} %")
-    print(f'  overruns in total: {sum(overruns)} (median per window '
-          f'{float(np.median(overruns)):g}); no 1 kHz loop here can do better')
+          f"{windows[0].get('latency_request')}), {args.windows} windows of {seconds:g} s per "
+          f"amount of work; load {result['load_average']:.2f}")
+    for ms, v in zip(args.work_ms, works):
+        mine = [w for w in windows if w['work_requested_ns'] == v]
+        overruns = [int(w['overruns']) for w in mine]
+        print(f"  work {ms:g} ms per step (calibrated {int(mine[0]['work_ns']) * 1e-6:.3f} ms):")
+        for w in mine:
+            print(f"    overruns {w['overruns']:>5} of {w['steps']} steps, max lateness "
+                  f"{w['max_lateness_ns'] * 1e-6:.3f} ms, late wake-ups {w['late_wakes']}, "
+                  f"work over 1.5x {w['slow_work']}, CPU stolen by the hypervisor "
+                  f"{w['steal_percent']} %")
+        print(f'    overruns in total: {sum(overruns)} (median per window '
+              f'{float(np.median(overruns)):g})'
+              + ('; no 1 kHz loop here can do better' if v == 0 else ''))
     return 0
 
 
@@ -163,9 +184,15 @@ def main(argv: List[str]) -> int:
                    help='paced: the floor loop (default); busy: read the clock, never sleep')
     p.add_argument('--duration', type=float, default=30.0, help='seconds of measuring')
     p.add_argument('--windows', type=int, default=1, help='paced: split into this many windows')
+    p.add_argument('--work-ms', type=float, nargs='+', default=[0.0],
+                   help='paced: computation per step [ms], one loop per value, their windows '
+                        'interleaved (0: none, the floor)')
     p.add_argument('--fifo', action='store_true', help='busy: run the loop under SCHED_FIFO 10')
     p.add_argument('--json', action='store_true', help='print one JSON object')
     args = p.parse_args(argv)
+    bad = [ms for ms in args.work_ms if not 0.0 <= ms < STEP_NS * 1e-6]
+    if bad:
+        p.error(f'--work-ms: got {bad[0]:g}; expected 0 <= ms < {STEP_NS * 1e-6:g}')
     if args.loop == 'paced':
         try:
             return _main_paced(args)

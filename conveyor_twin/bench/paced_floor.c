@@ -9,9 +9,15 @@
  * CONVEYOR_TWIN_CPU_LATENCY_REQUEST=1 and the device is writable. Whatever overruns this loop sees, no
  * 1 kHz loop on the machine can avoid: it is the host's floor.
  *
- * usage: paced_floor SECONDS [PERIOD_NS] [FIFO_PRIORITY]
+ * With WORK_NS > 0 each step, once its deadline is reached, does a fixed amount of computation
+ * (passes over a 128 kB array, calibrated before the loop to take WORK_NS at the median), as the
+ * twin's step does: a CPU that runs slower for a while makes that work late, which a loop doing
+ * no work never notices. Steps whose work took more than 1.5 times the calibrated time are
+ * counted (slow_work).
+ *
+ * usage: paced_floor SECONDS [PERIOD_NS] [FIFO_PRIORITY] [WORK_NS]
  * prints one JSON object: steps, overruns, max lateness [ns], wake-ups later than the spin
- * margin, the scheduling policy and the latency request obtained.
+ * margin, the scheduling policy and the latency request obtained, the work per step.
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -26,6 +32,11 @@
 
 #define SLEEP_MIN_NS 200000LL /* sleep only when the deadline is further than this [ns] */
 #define SPIN_NS 150000LL      /* wake this long before the deadline, then spin [ns] */
+#define WORK_LEN 16384        /* doubles in the work array (128 kB) */
+#define CALIBRATION_TRIALS 301
+
+static double work_array[WORK_LEN];
+static volatile double work_sink;
 
 static int64_t now_ns(void)
 {
@@ -41,17 +52,50 @@ static void sleep_until(int64_t t)
     }
 }
 
+/* The step's work: `passes` passes over the work array, each depending on the one before. */
+static void work(int64_t passes)
+{
+    double acc = work_sink;
+    for (int64_t p = 0; p < passes; p++)
+        for (int i = 0; i < WORK_LEN; i++) {
+            acc += work_array[i];
+            work_array[i] = acc * 1e-9;
+        }
+    work_sink = acc;
+}
+
+static int compare_i64(const void *a, const void *b)
+{
+    int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* The median time of one pass [ns]. */
+static int64_t pass_ns(void)
+{
+    int64_t t[CALIBRATION_TRIALS];
+    for (int k = 0; k < CALIBRATION_TRIALS; k++) {
+        int64_t t0 = now_ns();
+        work(1);
+        t[k] = now_ns() - t0;
+    }
+    qsort(t, CALIBRATION_TRIALS, sizeof t[0], compare_i64);
+    return t[CALIBRATION_TRIALS / 2] > 0 ? t[CALIBRATION_TRIALS / 2] : 1;
+}
+
 int main(int argc, char **argv)
 {
     if (argc < 2) {
-        fprintf(stderr, "usage: paced_floor SECONDS [PERIOD_NS] [FIFO_PRIORITY]\n");
+        fprintf(stderr, "usage: paced_floor SECONDS [PERIOD_NS] [FIFO_PRIORITY] [WORK_NS]\n");
         return 2;
     }
     double seconds = atof(argv[1]);
     int64_t period = argc > 2 ? atoll(argv[2]) : 1000000LL;
     int priority = argc > 3 ? atoi(argv[3]) : 10;
-    if (seconds <= 0 || period <= 0) {
-        fprintf(stderr, "paced_floor: SECONDS and PERIOD_NS must be positive\n");
+    int64_t work_ns = argc > 4 ? atoll(argv[4]) : 0;
+    if (seconds <= 0 || period <= 0 || work_ns < 0 || work_ns >= period) {
+        fprintf(stderr, "paced_floor: SECONDS and PERIOD_NS must be positive, WORK_NS in "
+                        "[0, PERIOD_NS)\n");
         return 2;
     }
     const char *policy = "normal";
@@ -66,6 +110,12 @@ int main(int argc, char **argv)
         int fd = open("/dev/cpu_dma_latency", O_WRONLY); /* held until the process ends */
         int32_t zero = 0;
         latency = fd >= 0 && write(fd, &zero, sizeof zero) == sizeof zero ? "held" : "refused";
+    }
+    int64_t passes = 0, work_calibrated = 0, slow_work = 0;
+    if (work_ns > 0) {
+        int64_t one = pass_ns();
+        passes = (work_ns + one / 2) / one > 0 ? (work_ns + one / 2) / one : 1;
+        work_calibrated = passes * one;
     }
     int64_t steps = (int64_t)(seconds * 1e9 / (double)period);
     int64_t overruns = 0, late_wakes = 0, max_lateness = 0;
@@ -86,11 +136,19 @@ int main(int argc, char **argv)
         }
         while (now_ns() < deadline) {
         }
+        if (passes) {
+            int64_t t0 = now_ns();
+            work(passes);
+            if (2 * (now_ns() - t0) > 3 * work_calibrated)
+                slow_work++;
+        }
     }
     printf("{\"steps\": %lld, \"overruns\": %lld, \"max_lateness_ns\": %lld, "
            "\"late_wakes\": %lld, \"period_ns\": %lld, \"policy\": \"%s\", "
-           "\"latency_request\": \"%s\"}\n",
+           "\"latency_request\": \"%s\", \"work_ns\": %lld, \"work_passes\": %lld, "
+           "\"slow_work\": %lld}\n",
            (long long)steps, (long long)overruns, (long long)max_lateness,
-           (long long)late_wakes, (long long)period, policy, latency);
+           (long long)late_wakes, (long long)period, policy, latency,
+           (long long)work_calibrated, (long long)passes, (long long)slow_work);
     return 0;
 }

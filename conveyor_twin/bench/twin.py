@@ -423,7 +423,11 @@ def floor_figures(window: Optional[Dict[str, object]]) -> Optional[Dict[str, obj
         return None
     from conveyor_twin.bench.host import paced_floor
     try:
-        return paced_floor(float(window['seconds']))
+        out = paced_floor(float(window['seconds']))
+        if window.get('work_ms'):   # then the same loop working as long as a step, after it
+            out['working'] = paced_floor(float(window['seconds']),
+                                         work_ns=int(round(float(window['work_ms']) * 1e6)))
+        return out
     except RuntimeError as exc:
         return {'error': str(exc)}
 
@@ -445,6 +449,13 @@ def compare_to_floor(figures: Dict[str, object], before: Optional[Dict[str, obje
     figures['floor']['overruns_per_min'] = round(floor_rate, 2)
     figures['overruns_per_min'] = round(twin_rate, 2)
     figures['overruns_vs_floor'] = round(twin_rate / floor_rate, 2) if floor_rate else None
+    working = [w['working'] for w in windows if 'working' in w]
+    if working:
+        rate = (sum(int(w['overruns']) for w in working) * 60.0
+                / sum(float(w['duration_s']) for w in working))
+        figures['floor']['working_overruns_per_min'] = round(rate, 2)
+        figures['floor']['working_work_ms'] = round(int(working[0]['work_ns']) * 1e-6, 3)
+        figures['overruns_vs_working_floor'] = round(twin_rate / rate, 2) if rate else None
 
 
 def foxglove_comparison(results: List[Dict[str, object]]) -> Dict[str, object]:
@@ -494,6 +505,10 @@ def _print(figures: Dict[str, object]) -> None:
               f"{floor.get('overruns_per_min')} per min; twin {figures.get('overruns_per_min')} "
               f"per min; twin / floor "
               f"{ratio if ratio is not None else 'n/a (the floor saw no overrun)'}")
+        if 'working_overruns_per_min' in floor:
+            print(f"  the floor loop working {floor['working_work_ms']} ms per step: "
+                  f"{floor['working_overruns_per_min']} overruns per min; twin / working floor "
+                  f"{figures.get('overruns_vs_working_floor', 'n/a')}")
     print(f"  twin summary: {figures.get('twin_summary')}")
     if 'foxglove_client' in figures:
         print(f"  Foxglove client: {figures['foxglove_client']}")
@@ -527,6 +542,9 @@ def main(argv: List[str]) -> int:
     p.add_argument('--floor-window', type=float, default=30.0,
                    help='paced floor loop before the first and after every twin window [s] '
                         '(0: none)')
+    p.add_argument('--floor-work-ms', type=float, default=0.0,
+                   help='after each floor window, one of the floor loop doing this much '
+                        'computation per step [ms] (e.g. the step time; 0: none)')
     p.add_argument('--rounds', type=int, default=1, help='twin windows per layout')
     p.add_argument('--foxglove', action='store_true',
                    help='composed twin without a Foxglove view, with a view and no client, '
@@ -538,7 +556,9 @@ def main(argv: List[str]) -> int:
     if args.foxglove:
         layouts = [(False, ''), (False, 'view'), (False, 'client')]
     results = []
-    floor_window = {'seconds': args.floor_window}
+    if not 0.0 <= args.floor_work_ms < 1.0:
+        p.error(f'--floor-work-ms: got {args.floor_work_ms:g}; expected 0 <= ms < 1')
+    floor_window = {'seconds': args.floor_window, 'work_ms': args.floor_work_ms}
     from conveyor_twin.bench.soak import claim_domain_id
     args.domain_id, domain_lock = claim_domain_id()  # held until the bench ends
     with domain_lock, tempfile.TemporaryDirectory() as directory:

@@ -28,6 +28,7 @@ def rounds_summary(results: List[Dict[str, object]]) -> Dict[str, Dict[str, obje
     for figures in results:
         v = out.setdefault(variant_of(figures), {
             'ratios': [], 'twin_overruns_per_min': [], 'floor_overruns_per_min': [],
+            'working_ratios': [],
             'lost': {t: 0 for t in STREAMS}, 'load_average': [], 'errors': 0})
         v['load_average'].append(figures.get('load_average'))
         if 'error' in figures:
@@ -36,6 +37,8 @@ def rounds_summary(results: List[Dict[str, object]]) -> Dict[str, Dict[str, obje
         v['ratios'].append(figures.get('overruns_vs_floor'))
         v['twin_overruns_per_min'].append(figures.get('overruns_per_min'))
         v['floor_overruns_per_min'].append((figures.get('floor') or {}).get('overruns_per_min'))
+        if 'overruns_vs_working_floor' in figures:
+            v['working_ratios'].append(figures['overruns_vs_working_floor'])
         expected = int(float(figures.get('window_s', 0.0)) * 1e9 / STEP_NS)
         for topic, stream in figures.get('streams', {}).items():
             # a stream that delivered fewer than two messages lost (nearly) all of the window's
@@ -45,6 +48,8 @@ def rounds_summary(results: List[Dict[str, object]]) -> Dict[str, Dict[str, obje
     for v in out.values():
         finite = [r for r in v['ratios'] if r is not None]
         v['median_ratio'] = float(np.median(finite)) if finite else None
+        finite = [r for r in v['working_ratios'] if r is not None]
+        v['median_working_ratio'] = float(np.median(finite)) if finite else None
         v['lost_total'] = sum(v['lost'].values())
     return out
 
@@ -58,6 +63,11 @@ def print_rounds(summary: Dict[str, Dict[str, object]]) -> None:
               f"{'n/a (the floor saw no overrun)' if median is None else f'{median:.2f}'}; "
               f"twin {v['twin_overruns_per_min']} per min, floor "
               f"{v['floor_overruns_per_min']} per min; load average {v['load_average']}")
+        if v['working_ratios']:
+            per_round = ', '.join('n/a' if r is None else f'{r:.2f}' for r in v['working_ratios'])
+            working = v['median_working_ratio']
+            print(f"  twin / floor loop working as long as a step, per round [{per_round}], "
+                  f"median {'n/a' if working is None else f'{working:.2f}'}")
         lost = ', '.join(f'{t} {n}' for t, n in v['lost'].items())
         print(f"  lost messages, all rounds: {lost} (total {v['lost_total']})"
               + (f"; {v['errors']} window(s) without a result" if v['errors'] else ''))
