@@ -2,6 +2,7 @@
 measure, the Wilson interval and the verdict, the reference file and its refusals, and a tiny
 run of both engines whose figures must be in range (not its wall-clock times)."""
 
+import dataclasses
 import json
 import math
 
@@ -9,8 +10,10 @@ import numpy as np
 import pytest
 
 from conveyor_twin.bench import clog, clog_reference, clog_scenes
+from conveyor_twin.bench.micro import pymunk_peer
 from conveyor_twin.cell import load_cell
 from conveyor_twin.cell.model import ObstacleKind
+from conveyor_twin.micro import MicroSim
 
 
 @pytest.mark.parametrize('gap', [1.5, 2, 3.5, 6])
@@ -211,6 +214,11 @@ def test_a_reference_file_for_other_parameters_is_refused(tmp_path, capsys):
         f.write('{"format": "something else"}')
     with pytest.raises(ValueError, match='not a bench clog reference'):
         clog_reference.load(path, 5, 0.2, clog_reference.settings())
+    # a file of an earlier version of the peer (its belt drive let jams creep) is refused
+    older = dict(clog_reference.new_file(5, 0.2, clog_reference.settings()), version=1)
+    clog_reference.save(older, path)
+    with pytest.raises(ValueError, match=f'version is 1 there but {clog_reference.VERSION}'):
+        clog_reference.load(path, 5, 0.2, clog_reference.settings())
 
 
 def test_a_gap_that_is_not_positive_or_wider_than_the_cells_is_refused():
@@ -222,3 +230,62 @@ def test_a_gap_that_is_not_positive_or_wider_than_the_cells_is_refused():
             clog_scenes.funnel_cell(gap)
     with pytest.raises(ValueError, match='scene'):
         clog_scenes.build_scene('hopper', 2)
+
+
+def _one_disc_cell(obstacles=()):
+    cell = clog_scenes.funnel_cell(4)
+    return dataclasses.replace(cell, obstacles=tuple(obstacles), micro=dataclasses.replace(
+        cell.micro, capacity=1))
+
+
+@pytest.mark.parametrize('v0, w0', [(0.0, 0.0), (0.5, 50.0), (0.3, 60.0), (0.5, -3.0)])
+def test_the_peers_belt_drive_is_ours_on_one_disc(v0, w0):
+    """From rest, spinning down at the belt speed, and sliding and spinning at once (the
+    footprint's coupling): the same velocity and spin as ours after 20 ms."""
+    pytest.importorskip('pymunk')
+    cell = _one_disc_cell()
+    space, drive, dt = pymunk_peer(cell, np.array([[1.0, 0.0]]))
+    body = next(iter(space.bodies))
+    body.velocity = (v0, 0.0)
+    body.angular_velocity = w0
+    for _ in range(20):
+        drive()
+        space.step(dt)
+    sim = MicroSim(cell, seed=1)
+    sim.spawn(0, 1.0, 0.0, 0.0, vx=v0, wz=w0)
+    sim.step(20)
+    view = sim.parts_view()
+    assert body.velocity.x == pytest.approx(float(view.vx[0]), abs=1e-9)
+    assert body.velocity.y == pytest.approx(0.0, abs=1e-12)
+    assert body.angular_velocity == pytest.approx(float(view.wz[0]), abs=1e-6)
+    assert view.vx[0] != v0 or view.wz[0] != w0     # the drive acted
+
+
+def test_the_peers_belt_drive_does_not_let_a_held_part_creep():
+    """A disc that barely rolls (a millionfold inertia), pushed by the belt against a wall at
+    60 degrees to the running direction with enough friction to hold it (tan 30 degrees = 0.58
+    < 1.0), stays where it is: the drive acts before pymunk's contact solve, so no step moves it
+    into the wall first (from where the position correction, along the normal only, would
+    leave it further along the wall every step)."""
+    pytest.importorskip('pymunk')
+    base = load_cell(None)
+    wall = next(o for o in base.obstacles if o.kind == ObstacleKind.WALL)
+    u = np.array([0.5, math.sqrt(3.0) / 2.0])            # along the wall
+    n = np.array([-u[1], u[0]])                          # its normal, upstream
+    a, b = np.array([1.0, 0.0]) - 0.15 * u, np.array([1.0, 0.0]) + 0.15 * u
+    obstacle = dataclasses.replace(wall, name='held', points=(tuple(a), tuple(b)),
+                                   friction=1.0, restitution=0.0)
+    cell = _one_disc_cell([obstacle])
+    part = dataclasses.replace(cell.part_types[0], inertia=1e6 * cell.part_types[0].inertia)
+    cell = dataclasses.replace(cell, part_types=(part,))
+    r = part.radius
+    start = np.array([1.0, 0.0]) + n * (r + 0.5 * obstacle.thickness)
+    space, drive, dt = pymunk_peer(cell, start[None, :], iterations=100, step=5e-4)
+    body = next(iter(space.bodies))
+    body.velocity = (0.0, 0.0)
+    for _ in range(2000):                                # 1 s
+        drive()
+        space.step(dt)
+    moved = np.array(body.position) - start
+    assert abs(float(moved @ u)) < 1e-5                  # 0.01 mm along the wall in 1 s
+    assert abs(float(moved @ n)) < 2e-4                  # within the slop of the wall

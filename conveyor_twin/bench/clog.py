@@ -19,12 +19,14 @@ The reference (:mod:`conveyor_twin.bench.clog_reference`) is pymunk at 100 itera
 ``--reference FILE`` uses them instead of running it again, ``--convergence`` runs it at 200
 iterations and at 0.25 ms steps as well.
 
-Measured (defaults, 20 seeds; the table is in docs/validation.md, "Clogging at a bottleneck"):
-the twin agrees with the reference in 4 of the 10 cases (1.5, 3 and 4 d at the deflector, 4 d
-in the funnel); at 2 and 2.5 d it clogs more often or passes more (deflector 20 and 10 of 20
-runs against 11 and 6, passed 25 % and 70 % against 22 % and 59 %; funnel 20 and 19 against 3
-and 1), and in the funnel at 3 d it stops 3 of 20 runs against none. The twin's 200 runs take
-about 3 min in one process, a reference run about ten times a twin run's CPU.
+Measured (8 seeds, the reference run alongside, 150 parts, 5 s): the twin agrees with the
+reference in 9 of the 10 cases; the clog probability falls from 8 of 8 runs at 1.5 and 2 d to
+none at 4 d in both engines and both scenes (funnel at 2.5 d 7 and 7 of 8, passed 28 % and
+28 %; at 3 d 2 and 1 of 8). At the deflector at 2.5 d the twin passes more (20 seeds: 10 of 20
+runs stopped against 17, passed 70 % against 38 %); there each engine holds the other's
+arches, so the difference is in how often an arch forms, not in how strongly it holds. The
+twin's 200 runs of the defaults take about 3 min in one process, a reference run about ten
+times a twin run's CPU.
 """
 
 import argparse

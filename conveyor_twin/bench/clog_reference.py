@@ -4,7 +4,7 @@ scenes, and its cache file.
 The peer is built by :func:`conveyor_twin.bench.micro.pymunk_peer` (the peer of ``bench micro``:
 the same geometry, per-pair friction and restitution, the same belt drive), run with
 :data:`PYMUNK_ITERATIONS` solver iterations, ``collision_slop`` :data:`PYMUNK_SLOP` m and a step
-of :data:`PYMUNK_STEP` s. A reference run costs about a thousand times a twin run, so its
+of :data:`PYMUNK_STEP` s. A reference run costs about ten times a twin run, so its
 per-run results can be saved (:func:`save`) and read back (:func:`load`); a file made for other
 scene parameters, part counts, windows, pymunk settings or start positions is refused with an
 error naming the field.
@@ -25,7 +25,9 @@ PYMUNK_STEP = 5e-4                  # s
 # convergence check: (iterations, step [s]) against the reference's own settings
 CONVERGENCE_SETTINGS = ((200, 5e-4), (100, 2.5e-4))
 FORMAT = 'conveyor_twin bench clog reference'
-VERSION = 1
+# 2: the peer's belt drive acts as forces before pymunk's contact solve, with the footprint's
+# coupling of sliding and spinning (files of version 1 hold runs whose jams crept)
+VERSION = 2
 
 
 def settings(iterations: int = PYMUNK_ITERATIONS, slop: float = PYMUNK_SLOP,

@@ -5,8 +5,9 @@ a 2.0 m x 0.5 m belt at 0.5 m/s with side walls and a 45 degree deflector across
 width; N discs of 10 mm diameter and 0.01 kg are placed on a hexagonal lattice upstream and
 run into the deflector for the warm-up, so the timed steps are a jam. Both engines step at
 dt = 1 ms with the same per-pair friction and restitution, the same disc and wall geometry
-(walls and deflector as segments of radius 5 mm) and the same belt drive (velocity relaxes
-toward the belt velocity by at most ``mu g dt``, spin by the matching torque). pymunk runs
+(walls and deflector as segments of radius 5 mm) and the same belt drive (ours: footprint
+friction coupling sliding and spinning, given to pymunk as each disc's force and torque, which
+it adds before its contact solve as ours does; :func:`pymunk_peer`). pymunk runs
 with its defaults (10 iterations, bounding-box tree) except ``collision_slop = 1e-4 m`` (ours);
 its belt drive is applied each step with ``pymunk.batch`` and numpy (no per-body Python).
 ``pymunk step`` times ``space.step`` alone; ``pymunk total`` adds the drive. The ratios are
@@ -193,14 +194,30 @@ def pymunk_peer(cell: Cell, positions: np.ndarray, *, iterations: Optional[int] 
 
     Discs of the cell's first part type stand at ``positions`` ((n, 2) [m]) moving at the belt
     speed; every obstacle is a static segment as thick as it is; the coefficients are matched
-    per pair. One belt runs along +x under every disc; the drive relaxes each velocity toward
-    it by at most ``mu g dt`` and the spin by the matching torque, as ours does.
+    per pair (pymunk's are constant: a part pair takes the mean of the part's static and
+    sliding coefficients, a part and an obstacle the obstacle's). One belt runs along +x under
+    every disc; the drive is ours (:func:`conveyor_twin.micro.drive.belt_drive`): Coulomb
+    friction over the footprint, the slip falling by at most ``mu g dt f`` and the spin by the
+    matching torque ``t``, with the footprint's coupling of sliding and spinning.
+
+    The drive function must be called before every ``space.step``: it sets each disc's force
+    and torque for the coming step, which pymunk adds to the velocities after moving the
+    bodies and before its contact solve, as ours drives before its contacts. (Setting the
+    velocities instead would move every body by the drive's ``dv dt`` before any contact saw
+    it; pymunk's position correction acts along the normals only, so jammed discs would creep
+    along their contacts at up to ``mu g dt`` per step, 1.7 mm/s at 0.5 ms, and arches that
+    friction holds would fold within a second or two.)
+
     ``iterations``: pymunk's solver iterations (default: pymunk's 10); ``slop``: its
     ``collision_slop`` (default: the cell's penetration slop); ``step``: the step [s] the drive
     is sized for (default: the cell's).
     """
     import pymunk
     import pymunk.batch
+
+    from conveyor_twin.micro.footprint import (FT_FORCE, FT_TORQUE, RADIUS_PER_SPIN_ARM,
+                                               footprint_table)
+    from conveyor_twin.micro.state import spin_arm
 
     part = cell.part_types[0]
     belt = cell.belts[0]
@@ -209,10 +226,11 @@ def pymunk_peer(cell: Cell, positions: np.ndarray, *, iterations: Optional[int] 
     if iterations is not None:
         space.iterations = int(iterations)
     space.collision_slop = cell.micro.penetration_slop if slop is None else slop
-    # pymunk multiplies the two shapes' coefficients: discs carry sqrt(pair value)
+    # pymunk multiplies the two shapes' coefficients: discs carry sqrt(pair value), at least
+    # 1e-9 (a pair value of 0 then gives 1e-18, and the obstacles' values stay exact)
     mu_pp = 0.5 * (part.friction_static + part.friction_sliding)
-    disc_mu = math.sqrt(mu_pp)
-    disc_e = math.sqrt(part.restitution)
+    disc_mu = max(math.sqrt(mu_pp), 1e-9)
+    disc_e = max(math.sqrt(part.restitution), 1e-9)
     for obstacle in cell.obstacles:
         a, b = obstacle.points
         seg = pymunk.Segment(space.static_body, a, b, obstacle.thickness / 2)
@@ -228,32 +246,54 @@ def pymunk_peer(cell: Cell, positions: np.ndarray, *, iterations: Optional[int] 
         shape.elasticity = disc_e
         space.add(body, shape)
     fields = pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY
+    forces = pymunk.batch.BodyFields.FORCE | pymunk.batch.BodyFields.TORQUE
     get_buf = pymunk.batch.Buffer()
     set_buf = pymunk.batch.Buffer()
-    dv_max = belt.friction * cell.settings.gravity * dt
-    dw_max = dv_max * part.mass * (2.0 * part.radius / 3.0) / part.inertia
-    # the space's static body is iterated too: find its row once and keep it at rest
-    ids_buf = pymunk.batch.Buffer()
-    pymunk.batch.get_space_bodies(space, pymunk.batch.BodyFields.BODY_ID, ids_buf)
-    ids = np.frombuffer(ids_buf.int_buf(), dtype=np.uintp)
-    dynamic = ids != space.static_body.id
-    out = np.zeros(3 * ids.size)
+    ft = footprint_table()
+    last = ft.shape[0] - 1
+    arm = RADIUS_PER_SPIN_ARM * spin_arm(part)                  # footprint radius [m]
+    dv_max = belt.friction * cell.settings.gravity * dt         # slip change, f = 1 [m/s]
+    dw_max = dv_max * part.mass * arm / part.inertia            # spin change, t = 1 [rad/s]
+    # velocity changes to forces and torques over the step
+    scale = np.array([part.mass / dt, part.mass / dt, part.inertia / dt])
+    rows = {}
+
+    def layout(count: int):
+        # the space's static body is iterated too (once it has shapes or after the first
+        # step): find its row when the number of rows changes, and keep it at rest
+        if rows.get('count') != count:
+            ids_buf = pymunk.batch.Buffer()
+            pymunk.batch.get_space_bodies(space, pymunk.batch.BodyFields.BODY_ID, ids_buf)
+            ids = np.frombuffer(ids_buf.int_buf(), dtype=np.uintp)
+            rows.update(count=count, dynamic=ids != space.static_body.id,
+                        out=np.zeros(3 * ids.size))
+        return rows['dynamic'], rows['out']
 
     def drive() -> None:
         get_buf.clear()
         pymunk.batch.get_space_bodies(space, fields, get_buf)
         v = np.frombuffer(get_buf.float_buf(), dtype=np.float64).reshape(-1, 3)
+        dynamic, out = layout(v.shape[0])
         dvx = belt.speed - v[:, 0]
         dvy = -v[:, 1]
         d = np.hypot(dvx, dvy)
-        f = np.minimum(1.0, dv_max / np.maximum(d, 1e-300))
+        # the footprint's factors at q = a |w| / (|slip| + a |w|) (0 without spin: sliding)
+        spin = arm * np.abs(v[:, 2])
+        q = spin / np.maximum(d + spin, 1e-300) * last
+        i = np.minimum(q.astype(np.intp), last - 1)
+        u = q - i
+        cf = ft[i, FT_FORCE] + u * (ft[i + 1, FT_FORCE] - ft[i, FT_FORCE])
+        ct = ft[i, FT_TORQUE] + u * (ft[i + 1, FT_TORQUE] - ft[i, FT_TORQUE])
+        f = np.minimum(1.0, dv_max * cf / np.maximum(d, 1e-300))
+        w_max = dw_max * ct
         res = out.reshape(-1, 3)
-        res[:, 0] = v[:, 0] + dvx * f
-        res[:, 1] = v[:, 1] + dvy * f
-        res[:, 2] = v[:, 2] - np.clip(v[:, 2], -dw_max, dw_max)
+        res[:, 0] = dvx * f
+        res[:, 1] = dvy * f
+        res[:, 2] = -np.clip(v[:, 2], -w_max, w_max)
+        res *= scale
         res[~dynamic] = 0.0
         set_buf.set_float_buf(out)
-        pymunk.batch.set_space_bodies(space, fields, set_buf)
+        pymunk.batch.set_space_bodies(space, forces, set_buf)
 
     return space, drive, dt
 
