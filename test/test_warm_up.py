@@ -72,3 +72,47 @@ def test_a_warm_up_on_an_empty_cache_says_once_that_it_compiles(tmp_path):
     assert result.returncode == 0, result.stderr[-3000:]
     assert result.stderr.count(NOTICE) == 1, result.stderr
     assert result.stderr.count('... done in') == 1, result.stderr
+
+
+# After the warm-up, a twin of a cell with an ``auto`` zone switches its tiles to macro and
+# back; prints every kernel that gained a signature meanwhile (loaded or compiled at that use).
+FIRST_SWITCH = '''
+import sys
+import numpy as np
+from numba.core.registry import CPUDispatcher
+from conveyor_twin.cell import load_cell
+from conveyor_twin.coord.assembly import build_twin
+from conveyor_twin.coord.warmup import warm_up
+
+def signatures():
+    return {f'{d.py_func.__module__}.{d.py_func.__qualname__}': len(d.signatures)
+            for name, mod in list(sys.modules.items()) if name.startswith('conveyor_twin')
+            for d in vars(mod).values() if isinstance(d, CPUDispatcher)}
+
+cell = load_cell(sys.argv[1])
+warm_up(cell, 1)
+before = signatures()
+built = build_twin(cell, seed=1)
+for _ in range(300):
+    built.twin.step(1)
+[region] = [r for r in built.coupling.regions if r.tiles is not None]
+for macro in (np.ones_like(region.tiles.macro), np.zeros_like(region.tiles.macro)):
+    built.coupling.force_tiles(region.sim.zone.name, macro)
+    for _ in range(20):
+        built.twin.step(1)
+after = signatures()
+print('captured', built.coupling.captured)
+print('loaded', sorted(k for k in after if after[k] != before.get(k, 0)))
+'''
+
+
+def test_after_warm_up_the_first_switch_of_an_auto_zone_loads_no_kernel():
+    cell = DEFAULT_CELL.parent / 'examples' / 'l_line.yaml'
+    result = subprocess.run([sys.executable, '-c', FIRST_SWITCH, str(cell)],
+                            capture_output=True, text=True, timeout=RUN_TIMEOUT,
+                            stdin=subprocess.DEVNULL, env=ros_subprocess_env({}))
+    assert result.returncode == 0, result.stderr[-3000:]
+    # the switch took parts into the macro scale (the capture kernels ran), and every kernel
+    # of the hand-over was loaded before the twin's first step
+    assert re.search(r'^captured [1-9]', result.stdout, re.MULTILINE), result.stdout
+    assert 'loaded []' in result.stdout, result.stdout

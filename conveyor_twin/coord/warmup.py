@@ -19,6 +19,8 @@ from conveyor_twin.coord.assembly import build_twin
 # Steps of the scratch twin: enough for every actuator to move and a part under each
 # barrier to produce its edges.
 WARM_UP_STEPS = 60
+# Steps after each forced switch of an ``auto`` zone (all tiles macro, then all micro).
+SWITCH_STEPS = 10
 
 
 def _beam_midpoints(cell: Cell) -> Sequence[tuple]:
@@ -31,7 +33,8 @@ def warm_up(cell: Cell, seed: int, steps: int = WARM_UP_STEPS) -> int:
 
     One part of each type is placed at every light barrier's beam (edges, event drain), every
     actuator is sent to the far end of its range, and every belt runs at its maximum speed.
-    Placements that overlap something are skipped. Nothing of the scratch twin is kept.
+    Placements that overlap something are skipped. Then every ``auto`` zone is switched to
+    macro and back (:data:`SWITCH_STEPS` steps each way). Nothing of the scratch twin is kept.
     """
     scratch = build_twin(cell, seed=seed)
     twin, micro = scratch.twin, scratch.micro
@@ -49,9 +52,31 @@ def warm_up(cell: Cell, seed: int, steps: int = WARM_UP_STEPS) -> int:
     for index, belt in enumerate(cell.belts):
         twin.actuation.set_belt_target(index, belt.max_speed)
     for _ in range(steps):
-        twin.step(1)
-        micro.edges()
-        micro.barrier_blocked()
-        micro.barrier_edge_count()
-        micro.parts()
-    return steps
+        _step(twin, micro)
+    return steps + _switch_auto_zones(scratch, SWITCH_STEPS if steps else 0)
+
+
+def _step(twin, micro) -> None:
+    twin.step(1)
+    micro.edges()
+    micro.barrier_blocked()
+    micro.barrier_edge_count()
+    micro.parts()
+
+
+def _switch_auto_zones(scratch, steps: int) -> int:
+    """Turn every tile of each ``auto`` zone macro (the parts in it are captured), step, turn
+    them micro again (the density is released as parts), step: the hand-over's kernels load
+    here, not at the run's first switch. Return the steps taken."""
+    taken = 0
+    coupling = scratch.coupling
+    for region in getattr(coupling, 'regions', ()):
+        tiles = region.tiles
+        if tiles is None or not steps:
+            continue
+        for macro in (np.ones_like(tiles.macro), np.zeros_like(tiles.macro)):
+            coupling.force_tiles(region.sim.zone.name, macro)
+            for _ in range(steps):
+                _step(scratch.twin, scratch.micro)
+            taken += steps
+    return taken
