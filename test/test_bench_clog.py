@@ -289,3 +289,85 @@ def test_the_peers_belt_drive_does_not_let_a_held_part_creep():
     moved = np.array(body.position) - start
     assert abs(float(moved @ u)) < 1e-5                  # 0.01 mm along the wall in 1 s
     assert abs(float(moved @ n)) < 2e-4                  # within the slop of the wall
+
+
+def test_the_scenes_part_has_a_constant_friction_the_peers():
+    base = load_cell(None)
+    part = base.part_types[0]
+    assert part.friction_static > part.friction_sliding      # the spacer's own law falls
+    for name in clog_scenes.SCENES:
+        scene = clog_scenes.build_scene(name, 2.5, base)
+        p = scene.cell.part_types[0]
+        mean = 0.5 * (part.friction_static + part.friction_sliding)
+        assert p.friction_static == p.friction_sliding == pytest.approx(mean)
+        assert scene.parameters()['part']['friction_static'] == pytest.approx(mean)
+        assert dataclasses.replace(p, friction_static=part.friction_static,
+                                   friction_sliding=part.friction_sliding) == part
+
+
+def _slide_along_wall(cell, engine):
+    """Push a disc that cannot roll (a millionfold inertia) from rest against a wall at 80
+    degrees to the running direction for 1 s; return how far it moved along the wall [m]."""
+    base = load_cell(None)
+    wall = next(o for o in base.obstacles if o.kind == ObstacleKind.WALL)
+    angle = math.radians(80.0)
+    u = np.array([math.cos(angle), math.sin(angle)])     # along the wall
+    n = np.array([-u[1], u[0]])                          # its normal, upstream
+    centre = np.array([1.0, 0.0])
+    obstacle = dataclasses.replace(wall, name='slope', restitution=0.0, friction=0.15,
+                                   points=(tuple(centre - 0.15 * u), tuple(centre + 0.15 * u)))
+    cell = dataclasses.replace(cell, obstacles=(obstacle,), micro=dataclasses.replace(
+        cell.micro, capacity=1))
+    part = dataclasses.replace(cell.part_types[0], inertia=1e6 * cell.part_types[0].inertia)
+    cell = dataclasses.replace(cell, part_types=(part,))
+    start = centre + n * (part.radius + 0.5 * obstacle.thickness + 1e-4)    # 0.1 mm clear
+    if engine == 'pymunk':
+        space, drive, dt = pymunk_peer(cell, start[None, :], iterations=100, step=5e-4)
+        body = next(iter(space.bodies))
+        body.velocity = (0.0, 0.0)
+        for _ in range(2000):
+            drive()
+            space.step(dt)
+        end = np.array(body.position)
+    else:
+        sim = MicroSim(cell, seed=1)
+        sim.spawn(0, start[0], start[1], 0.0, vx=0.0)
+        sim.step(int(round(1.0 / sim.dt)))
+        view = sim.parts_view()
+        end = np.array([float(view.x[0]), float(view.y[0])])
+    return float((end - start) @ u)
+
+
+def test_a_disc_slides_along_a_wall_alike_in_both_engines_with_the_scenes_friction():
+    """The belt pushes the disc into the wall at 80 degrees: with the wall's constant 0.15 it
+    slides at 0.5 m/s (cos 80 - 0.15 sin 80) = 13 mm/s in both engines; with the spacer's own
+    law the twin's static 0.21 holds it (tan 80 < 1 / 0.21), which pymunk's constant friction
+    could not model."""
+    pytest.importorskip('pymunk')
+    cell = clog_scenes.build_scene('funnel', 4).cell
+    twin = _slide_along_wall(cell, 'twin')
+    peer = _slide_along_wall(cell, 'pymunk')
+    assert twin > 0.008 and peer > 0.008
+    assert twin == pytest.approx(peer, rel=0.02)
+    own = dataclasses.replace(cell, part_types=load_cell(None).part_types)
+    assert abs(_slide_along_wall(own, 'twin')) < 1e-4
+
+
+def test_convergence_runs_every_setting_and_takes_stored_runs_for_the_references_own():
+    scene = clog_scenes.build_scene('funnel', 3)
+    asked = []
+
+    def run_many(s, iterations, step):
+        asked.append((s.name, s.gap, iterations, step))
+        return [{'setting': (iterations, step), 'seed': seed} for seed in (1, 2)]
+    stored = [{'stored': seed} for seed in (1, 2, 3)]
+    seen = []
+    out = clog_reference.convergence([scene], 2, 5, 0.2, {'funnel/3': stored},
+                                     on_setting=lambda k, label, runs: seen.append(label),
+                                     run_many=run_many)
+    assert asked == [('funnel', 3, i, t) for i, t in clog_reference.CONVERGENCE_SETTINGS]
+    own = (f'{clog_reference.PYMUNK_ITERATIONS} iterations, '
+           f'{clog_reference.PYMUNK_STEP * 1e3:g} ms')
+    assert seen[0] == own and list(out['funnel/3']) == seen
+    assert out['funnel/3'][own] == stored[:2]
+    assert len(seen) == 1 + len(clog_reference.CONVERGENCE_SETTINGS)

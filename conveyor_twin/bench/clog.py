@@ -15,18 +15,19 @@ diameter) and a verdict: the twin agrees when its clog probability lies inside t
 interval and its mean fraction passed within :data:`PASSED_TOLERANCE` of the reference's.
 
 The reference (:mod:`conveyor_twin.bench.clog_reference`) is pymunk at 100 iterations and
-0.5 ms steps; ``--save-reference FILE`` runs it alone and keeps its per-run results,
-``--reference FILE`` uses them instead of running it again, ``--convergence`` runs it at 200
-iterations and at 0.25 ms steps as well.
+0.25 ms steps, with the same friction law as the twin (constant coefficients, the scenes'
+part's static and sliding values both their mean); ``--save-reference FILE`` runs it alone and
+keeps its per-run results, ``--reference FILE`` uses them instead of running it again,
+``--convergence`` runs it at 0.125 ms steps and at 200 iterations as well.
 
-Measured (8 seeds, the reference run alongside, 150 parts, 5 s): the twin agrees with the
-reference in 9 of the 10 cases; the clog probability falls from 8 of 8 runs at 1.5 and 2 d to
-none at 4 d in both engines and both scenes (funnel at 2.5 d 7 and 7 of 8, passed 28 % and
-28 %; at 3 d 2 and 1 of 8). At the deflector at 2.5 d the twin passes more (20 seeds: 10 of 20
-runs stopped against 17, passed 70 % against 38 %); there each engine holds the other's
-arches, so the difference is in how often an arch forms, not in how strongly it holds. The
-twin's 200 runs of the defaults take about 3 min in one process, a reference run about ten
-times a twin run's CPU.
+Measured (20 seeds, 150 parts, 5 s, against a reference at 0.25 ms whose clogging agrees with
+0.125 ms): the twin agrees in 6 of the 10 cases (1.5, 3 and 4 d at the deflector; 1.5, 2 and 4 d
+in the funnel); the clog probability falls from 20 of 20 runs at 1.5 d to none at 4 d in both
+engines and both scenes. Where it differs the twin holds its arches less: deflector 2 d 19 and
+20 of 20 stopped, passed 29 % against 14 %; deflector 2.5 d 11 against 20 of 20, 60 % against
+23 %; funnel 2.5 d 19 and 20 of 20, 24 % against 14 %; funnel 3 d 2 against 8 of 20, 92 %
+against 75 %. The twin's 200 runs take 82 s in two processes, a reference run about twenty
+times a twin run.
 """
 
 import argparse
@@ -231,8 +232,19 @@ def _convergence(args, gaps: List[float], pymunk: Dict) -> Dict:
             base_runs[reference.key(scene.name, scene.gap)] = reference.runs_for(
                 data, args.reference, scene,
                 ((s, scene.release(args.parts, s)) for s in range(1, args.seeds + 1)))
-    return reference.convergence(scenes, args.seeds, args.parts, args.window, base_runs,
-                                 on_setting=None if args.json else _print_convergence)
+    pool = ProcessPoolExecutor(max_workers=args.jobs) if args.jobs > 1 else None
+
+    def run_many(scene: Scene, iterations: int, step: float) -> List[Dict]:
+        setting = reference.settings(iterations, pymunk['slop_m'], step)
+        return _run_tasks([('pymunk', scene.name, scene.gap, seed, args.parts, args.window,
+                            setting) for seed in range(1, args.seeds + 1)], pool)
+    try:
+        return reference.convergence(scenes, args.seeds, args.parts, args.window, base_runs,
+                                     on_setting=None if args.json else _print_convergence,
+                                     run_many=run_many)
+    finally:
+        if pool is not None:
+            pool.shutdown()
 
 
 def _scenes(args) -> List[str]:
@@ -258,7 +270,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--save-reference', metavar='FILE',
                    help='run the reference alone and write its runs to FILE')
     p.add_argument('--convergence', action='store_true',
-                   help='run the reference at 200 iterations and at 0.25 ms steps too')
+                   help='run the reference at its own settings and at ' + ' and '.join(
+                       f'{i} iterations, {t * 1e3:g} ms' for i, t in
+                       reference.CONVERGENCE_SETTINGS) + ' (--jobs: seeds in parallel)')
     p.add_argument('--pymunk-iterations', type=int, default=reference.PYMUNK_ITERATIONS)
     p.add_argument('--pymunk-slop', type=float, default=reference.PYMUNK_SLOP, help='[m]')
     p.add_argument('--pymunk-step', type=float, default=reference.PYMUNK_STEP, help='[s]')

@@ -4,8 +4,9 @@ scenes, and its cache file.
 The peer is built by :func:`conveyor_twin.bench.micro.pymunk_peer` (the peer of ``bench micro``:
 the same geometry, per-pair friction and restitution, the same belt drive), run with
 :data:`PYMUNK_ITERATIONS` solver iterations, ``collision_slop`` :data:`PYMUNK_SLOP` m and a step
-of :data:`PYMUNK_STEP` s. A reference run costs about ten times a twin run, so its
-per-run results can be saved (:func:`save`) and read back (:func:`load`); a file made for other
+of :data:`PYMUNK_STEP` s (the coarsest step whose clogging agrees with half of it;
+``--convergence`` repeats that check). A reference run costs about twenty times a twin run, so
+its per-run results can be saved (:func:`save`) and read back (:func:`load`); a file made for other
 scene parameters, part counts, windows, pymunk settings or start positions is refused with an
 error naming the field.
 """
@@ -13,7 +14,7 @@ error naming the field.
 import json
 import os
 import time
-from typing import Dict, Iterable, Optional, Sequence, Tuple
+from typing import Callable, Dict, Iterable, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -21,9 +22,9 @@ from conveyor_twin.bench.clog_scenes import Scene, Watch, positions_digest, samp
 
 PYMUNK_ITERATIONS = 100
 PYMUNK_SLOP = 1e-4                  # m
-PYMUNK_STEP = 5e-4                  # s
+PYMUNK_STEP = 2.5e-4                # s (at 0.5 ms the arches are weaker: see docs/validation.md)
 # convergence check: (iterations, step [s]) against the reference's own settings
-CONVERGENCE_SETTINGS = ((200, 5e-4), (100, 2.5e-4))
+CONVERGENCE_SETTINGS = ((100, 1.25e-4), (200, 2.5e-4))
 FORMAT = 'conveyor_twin bench clog reference'
 # 2: the peer's belt drive acts as forces before pymunk's contact solve, with the footprint's
 # coupling of sliding and spinning (files of version 1 hold runs whose jams crept)
@@ -167,12 +168,15 @@ def runs_for(data: Dict, path: str, scene: Scene,
 
 
 def convergence(scenes: Sequence[Scene], seeds: int, parts: int, window: float,
-                base_runs: Optional[Dict[str, list]] = None, on_setting=None) -> Dict:
+                base_runs: Optional[Dict[str, list]] = None, on_setting=None,
+                run_many: Optional[Callable[[Scene, int, float], list]] = None) -> Dict:
     """Run the reference at the settings of :data:`CONVERGENCE_SETTINGS` and at its own.
 
     ``base_runs`` maps a scene key to stored runs at the reference's own settings (seeds
     1..``seeds``), which are then not run again. ``on_setting(key, label, runs)`` is called
-    after each setting. Returns {scene key: {setting label: runs}}.
+    after each setting. ``run_many(scene, iterations, step)`` returns the runs of seeds
+    1..``seeds`` (default: one after the other in this process). Returns {scene key: {setting
+    label: runs}}.
     """
     out: Dict = {}
     own = (PYMUNK_ITERATIONS, PYMUNK_STEP)
@@ -184,6 +188,8 @@ def convergence(scenes: Sequence[Scene], seeds: int, parts: int, window: float,
             label = f'{iterations} iterations, {step * 1e3:g} ms'
             if (iterations, step) == own and base_runs and k in base_runs:
                 runs = base_runs[k][:seeds]
+            elif run_many is not None:
+                runs = run_many(scene, iterations, step)
             else:
                 runs = [run_pymunk(scene, pts, window, iterations=iterations, step=step)
                         for pts in starts]

@@ -13,9 +13,17 @@ clear diameters on the belt's centre line, its downstream edge where the deflect
 (random sequential addition) in a block upstream of the funnel (:func:`random_release`).
 
 In both, the parts (the cell's first part type) start at the belt speed; sources, sinks, light
-barriers and actuators are left out. A part has *passed* once its centre is more than a radius
-beyond the downstream end of the bottleneck (:attr:`Scene.pass_line`). A run has *stopped* when
-no part passed during the last :data:`QUIET` s of the window while parts remain upstream.
+barriers and actuators are left out. The part's contact friction is made constant
+(:func:`constant_friction`): its static and sliding coefficients both become their mean (0.215
+for the spacer), so the twin's part-part friction is that constant and its part-obstacle
+friction the obstacle's coefficient (0.15) at every sliding speed. pymunk's coefficients are
+constant, and the peer takes exactly these values per pair; matching the twin's
+speed-dependent law (Horváth et al.: static below the transition speed) would instead need a
+Python callback per contact and step. Both engines thus model the same friction law.
+
+A part has *passed* once its centre is more than a radius beyond the downstream end of the
+bottleneck (:attr:`Scene.pass_line`). A run has *stopped* when no part passed during the last
+:data:`QUIET` s of the window while parts remain upstream.
 """
 
 import dataclasses
@@ -40,6 +48,19 @@ FUNNEL_ANGLE_DEG = 30.0             # funnel: angle of each wall to the running 
 RELEASE_PACKING = 0.35              # funnel: area fraction of the random release block
 RELEASE_CLEARANCE = 0.02            # funnel: least gap between two released parts [diameters]
 FUNNEL_NAMES = ('funnel_left', 'funnel_right')
+
+
+def constant_friction(cell: Cell) -> Cell:
+    """Return ``cell`` with its first part type's contact friction constant.
+
+    ``friction_static`` and ``friction_sliding`` both become their mean, the value the pymunk
+    peer takes for a part pair; with equal coefficients the twin's part-obstacle friction is the
+    obstacle's ``friction`` at every sliding speed, the peer's value for that pair.
+    """
+    part = cell.part_types[0]
+    mu = 0.5 * (part.friction_static + part.friction_sliding)
+    part = dataclasses.replace(part, friction_static=mu, friction_sliding=mu)
+    return dataclasses.replace(cell, part_types=(part,) + tuple(cell.part_types[1:]))
 
 
 def _deflector(cell: Cell) -> int:
@@ -261,8 +282,11 @@ class Scene:
 
 
 def build_scene(name: str, gap: float, base: Optional[Cell] = None) -> Scene:
-    """Return scene ``name`` (one of :data:`SCENES`) with a gap of ``gap`` part diameters."""
-    base = load_cell(None) if base is None else base
+    """Return scene ``name`` (one of :data:`SCENES`) with a gap of ``gap`` part diameters.
+
+    The part's contact friction is made constant (:func:`constant_friction`).
+    """
+    base = constant_friction(load_cell(None) if base is None else base)
     r = base.part_types[0].radius
     if name == 'deflector':
         cell = gap_cell(gap, base)

@@ -195,10 +195,12 @@ def pymunk_peer(cell: Cell, positions: np.ndarray, *, iterations: Optional[int] 
     Discs of the cell's first part type stand at ``positions`` ((n, 2) [m]) moving at the belt
     speed; every obstacle is a static segment as thick as it is; the coefficients are matched
     per pair (pymunk's are constant: a part pair takes the mean of the part's static and
-    sliding coefficients, a part and an obstacle the obstacle's). One belt runs along +x under
-    every disc; the drive is ours (:func:`conveyor_twin.micro.drive.belt_drive`): Coulomb
-    friction over the footprint, the slip falling by at most ``mu g dt f`` and the spin by the
-    matching torque ``t``, with the footprint's coupling of sliding and spinning.
+    sliding coefficients, a part and an obstacle the obstacle's; for a part whose two
+    coefficients are equal, as in ``bench clog``, that is the twin's law exactly). One belt
+    runs along +x under every disc; the drive is ours
+    (:func:`conveyor_twin.micro.drive.belt_drive`): Coulomb friction over the footprint, the
+    slip falling by at most ``mu g dt f`` and the spin by the matching torque ``t``, with the
+    footprint's coupling of sliding and spinning.
 
     The drive function must be called before every ``space.step``: it sets each disc's force
     and torque for the coming step, which pymunk adds to the velocities after moving the
