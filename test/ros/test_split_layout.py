@@ -4,6 +4,8 @@ The same cell, seed and command sequence must give bit-identical streams whether
 composed in one process or split over three, and from one run to the next.
 """
 
+import warnings
+
 from conveyor_twin_msgs.msg import ActuatorCommand, BeltCommand
 from conveyor_twin_msgs.srv import Reset
 import pytest
@@ -16,6 +18,7 @@ from conveyor_twin.split.launch import launch, ros_args
 from conveyor_twin.wire import cdr
 from test.ros.test_node_parameters import check_parameters as check_node_parameters, NODES
 from conveyor_twin.testing import Driver
+from conveyor_twin.testing.driver import EVERY_STEP
 from conveyor_twin.testing.errors import TwinTimeoutError
 
 pytestmark = pytest.mark.ros
@@ -81,8 +84,29 @@ def run_composed(context, name: str, cell_file: str = '', after_reset: int = 0):
         twin.stop()
 
 
+class StreamNeverArrived(AssertionError):
+    """The split twin stepped, and one of its streams delivered nothing at all."""
+
+
 def run_split(context, ros_processes, tmp_path, tag: str, check_parameters: bool = False,
               cell_file: str = '', after_reset: int = 0):
+    """Run the sequence on a split twin; return its digests, counts and driver.
+
+    A stream of which nothing at all arrived while the others did (its publisher matched on
+    this side, the other side never sent to this subscription: seen about once in a few
+    hundred split runs) fails the run; it is started once more with fresh processes, and the
+    first run's failure becomes a warning of the test."""
+    try:
+        return _run_split(context, ros_processes, tmp_path, tag, check_parameters, cell_file,
+                          after_reset)
+    except StreamNeverArrived as exc:
+        warnings.warn(f'split run {tag!r} started again: {exc}')
+        return _run_split(context, ros_processes, tmp_path, tag + '_again', check_parameters,
+                          cell_file, after_reset)
+
+
+def _run_split(context, ros_processes, tmp_path, tag: str, check_parameters: bool,
+               cell_file: str, after_reset: int):
     start_split(ros_processes, tmp_path, tag, cell_file)
     driver = Driver(context, density_per_step=_density_per_step(load_cell(cell_file or None)),
                     name='probe_' + tag)
@@ -92,7 +116,12 @@ def run_split(context, ros_processes, tmp_path, tag: str, check_parameters: bool
             driver.run(SEQUENCE)
             _reset_and_step(driver, after_reset)
         except TwinTimeoutError as exc:  # what the three processes said, with the timeout
-            raise AssertionError(f'{exc}\n{_logs(tmp_path)}') from exc
+            counts = driver.counts()
+            expected = EVERY_STEP + (('density',) if driver.density_per_step else ())
+            silent = [t for t in expected if counts.get(t, 0) == 0]
+            kind = (StreamNeverArrived if silent and len(silent) < len(expected)
+                    else AssertionError)
+            raise kind(f'{exc}\n{_logs(tmp_path)}') from exc
         if check_parameters:  # each process's real node declares the parameters
             for node in NODES:
                 check_node_parameters(driver, node, seed=SEED, mode='lockstep',
