@@ -93,8 +93,8 @@ def run_split(context, ros_processes, tmp_path, tag: str, check_parameters: bool
     """Run the sequence on a split twin; return its digests, counts and driver.
 
     A stream of which nothing at all arrived while the others did (its publisher matched on
-    this side, the other side never sent to this subscription: seen about once in a few
-    hundred split runs) fails the run; it is started once more with fresh processes, and the
+    this side, the other side never sent to this subscription: rare, its cause not found
+    yet) fails the run; it is started once more with fresh processes, and the
     first run's failure becomes a warning of the test."""
     try:
         return _run_split(context, ros_processes, tmp_path, tag, check_parameters, cell_file,
