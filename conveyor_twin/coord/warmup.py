@@ -70,9 +70,9 @@ def _switch_auto_zones(scratch, steps: int) -> int:
     here, not at the run's first switch. Return the steps taken."""
     taken = 0
     coupling = scratch.coupling
-    for region in getattr(coupling, 'regions', ()):
+    for region in getattr(coupling, 'regions', ()) if steps else ():
         tiles = region.tiles
-        if tiles is None or not steps:
+        if tiles is None:
             continue
         for macro in (np.ones_like(tiles.macro), np.zeros_like(tiles.macro)):
             coupling.force_tiles(region.sim.zone.name, macro)
