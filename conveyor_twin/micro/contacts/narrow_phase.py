@@ -100,8 +100,9 @@ def _impact(dx, dy, ux, uy, radii, normal, depth, point):
     depth ``-gap`` the sweeps let close along it (``u_n t``, ``t`` the time to touch: an
     impulse only if ``t`` is within the substep) and the point midway between where each
     disc's surface meets the other's, relative to B's centre (one point for both bodies, so
-    the impulses keep angular momentum). Where they separate or pass each other: ``normal``
-    (the line of centres), ``depth`` and ``point`` unchanged.
+    the impulses keep angular momentum). Where they separate or pass each other, or approach
+    so slowly that ``|u|^2`` underflows to 0: ``normal`` (the line of centres),
+    ``depth`` and ``point`` unchanged.
 
     The normal at the meeting makes an impact that is resolved before the discs touch leave
     them as if they had touched (an oblique impact's angle stays that of touching discs).
@@ -111,7 +112,10 @@ def _impact(dx, dy, ux, uy, radii, normal, depth, point):
     a = ux * ux + uy * uy
     rsum = ra + rb
     disc = b * b - a * (dx * dx + dy * dy - rsum * rsum)
-    if b >= 0.0 or disc < 0.0:
+    # a == 0 and b < 0: an approach below ~1e-162 m/s whose square underflowed (what a long
+    # geometric decay, as in a jam, leaves of a speed); within a substep the discs move less
+    # than 1e-160 m, so the line of centres is their normal and the gap their depth, as given
+    if b >= 0.0 or disc < 0.0 or a == 0.0:
         return normal[0], normal[1], depth, point[0], point[1]
     t = (-b - math.sqrt(disc)) / a
     nx = (dx + ux * t) / rsum
