@@ -34,6 +34,8 @@ FINISH_TIMEOUT = 60.0
 STALLED_AFTER = 10.0
 #: A cell whose node has been out of the ROS graph this long, not done, is said to be gone [s].
 GONE_AFTER = 3.0
+#: A done cell that has waited this long for its neighbours' done reports says which [s].
+WAITING_SAID_AFTER = 10.0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -109,7 +111,7 @@ def _interrupts() -> List[bool]:
 
 
 def run_cell(plant: Plant, args: argparse.Namespace) -> int:
-    """Run one cell until the plant's end step (every cell done) or a signal."""
+    """Run one cell until the plant's end step (it and every neighbour done) or a signal."""
     from conveyor_twin.ros.plant_cell_node import PlantCellNode
     end = int(round(args.duration / plant.step)) if args.duration > 0 else 0
     run = args.run_id if args.run_id is not None else time.time_ns() & 0xFFFFFFFFFFFF
@@ -131,17 +133,30 @@ def run_cell(plant: Plant, args: argparse.Namespace) -> int:
     node.start()
     try:
         last = 0.0
+        done_at = None
+        said = False
         while not stop:
             if node.error is not None:
                 break
             if node.done.is_set():
-                if node.all_done() and not args.hold:
+                # its neighbours have its final batches once they are done; no other cell
+                # needs anything from it (a monitor gets the done report before it ends)
+                if not node.neighbours_not_done() and not args.hold:
                     break
-                if time.monotonic() - last > 0.5:  # a late subscriber gets it too
+                now = time.monotonic()
+                done_at = now if done_at is None else done_at
+                if now - last > 0.5:  # a late subscriber gets it too
                     node.report_done()
-                    last = time.monotonic()
+                    last = now
+                if not said and not args.hold and now - done_at > WAITING_SAID_AFTER:
+                    print(f'conveyor-twin plant: {node.describe_waiting()}', file=sys.stderr,
+                          flush=True)
+                    said = True
             time.sleep(0.05)
     finally:
+        if node.done.is_set() and node.neighbours_not_done() and not args.hold:
+            print(f'conveyor-twin plant: stopped: {node.describe_waiting()}', file=sys.stderr,
+                  flush=True)
         node.stop()
         core = node.core
         print(json.dumps({'cell': core.name, 'step': core.step_index,

@@ -353,6 +353,24 @@ class PlantCellNode:
         names = [c.name for c in self.plant.cells]
         return all(n in self.reports and self.reports[n].done for n in names)
 
+    def neighbours_not_done(self) -> List[str]:
+        """Return the neighbours (:meth:`neighbours`) that have not reported ``done``: a cell
+        that is done may end once this is empty, since each neighbour has then heard its
+        final batches (a neighbour is done only once settled), and other cells never need
+        anything from it."""
+        return [n for n in self.neighbours() if n not in self.reports
+                or not self.reports[n].done]
+
+    def describe_waiting(self) -> str:
+        """Say which neighbours this done cell waits for, with their last reported step."""
+        parts = []
+        for n in self.neighbours_not_done():
+            report = self.reports.get(n)
+            parts.append(f'{n!r} (last report: step {report.step})' if report is not None
+                         else f'{n!r} (no report heard)')
+        return (f'cell {self.name!r} is done at step {self.core.step_index}; waiting for the '
+                f'done reports of ' + ', '.join(parts))
+
     def _spin(self, stop: threading.Event) -> None:
         try:
             spin_until(self.executor, stop)
