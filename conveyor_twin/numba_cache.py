@@ -4,8 +4,9 @@
 source: for an editable install that is the source tree, shared by every environment built from
 it, and for a wheel it is site-packages, which may be read-only. The kernels of this package are
 cached per environment instead, in :func:`cache_root` = ``<sys.prefix>/var/cache/conveyor_twin/
-numba`` (a venv's prefix is the venv), one directory per source directory (``micro/contacts``
-...). It is the same for an editable and a wheel install, holds only what this environment's
+numba/<tree>`` (a venv's prefix is the venv; ``<tree>`` names the package's source tree, so
+two checkouts run with one environment keep apart caches), one directory per source directory
+(``micro/contacts`` ...). It is the same for an editable and a wheel install, holds only what this environment's
 numba, Python and CPU compiled, survives a reinstall of the package and goes with the
 environment. ``conveyor-twin warm-up`` (``make setup`` runs it) fills it.
 
@@ -56,9 +57,17 @@ QUIET_AFTER = 1.0
 COMPILE_ESTIMATE = 20
 
 
+def tree_folder(root: Path) -> str:
+    """Return the cache folder's name for the package's source tree at ``root``: two trees
+    run with one environment (two checkouts, a copy on ``PYTHONPATH``) keep apart caches and
+    stamps, so neither drops the other's kernels."""
+    return f'{root.parent.name}-{hashlib.sha1(str(root).encode()).hexdigest()[:12]}'
+
+
 def cache_root() -> Path:
-    """Return this environment's cache directory of the package's kernels."""
-    return Path(os.path.realpath(sys.prefix)) / 'var' / 'cache' / 'conveyor_twin' / 'numba'
+    """Return this environment's cache directory of the kernels of this source tree."""
+    return (Path(os.path.realpath(sys.prefix)) / 'var' / 'cache' / 'conveyor_twin' / 'numba'
+            / tree_folder(_ROOT))
 
 
 def active_cache_dir() -> Path:

@@ -3,6 +3,7 @@
 import os
 from pathlib import Path
 import re
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -89,6 +90,40 @@ def test_a_file_outside_the_kernels_changes_nothing(tree):
     (tree / 'cli.py').write_text('# not a kernel\n')
     numba_cache.drop_stale_caches()
     assert _caches(tree) == before
+
+
+def _cache_state(cache: Path) -> tuple:
+    stamp = cache / numba_cache._STAMP
+    return (stamp.read_text() if stamp.exists() else None,
+            sorted(p.relative_to(cache).as_posix() for p in cache.rglob('*.nb?')))
+
+
+def test_a_copy_of_the_tree_run_with_this_environment_keeps_apart_from_its_cache(tmp_path):
+    copy = tmp_path / 'copy'
+    shutil.copytree(PACKAGE, copy / 'conveyor_twin',
+                    ignore=shutil.ignore_patterns('__pycache__'))
+    kernel = copy / 'conveyor_twin' / 'micro' / 'drive.py'
+    kernel.write_text(kernel.read_text() + '\n# edited in the copy\n')
+    ours = numba_cache.cache_root()
+    numba_cache.drop_stale_caches()   # this tree's stamp is current
+    before = _cache_state(ours)
+    environment = {k: v for k, v in os.environ.items() if not k.startswith('NUMBA_')}
+    environment['PYTHONPATH'] = str(copy)
+    result = subprocess.run(
+        [sys.executable, '-c', 'import conveyor_twin.numba_cache as nc\n'
+         'print(nc.cache_root())\nprint(nc.__file__)'], cwd=str(copy), capture_output=True,
+        text=True, timeout=RUN_TIMEOUT, stdin=subprocess.DEVNULL, env=environment)
+    assert result.returncode == 0, result.stderr[-4000:]
+    theirs, module = (Path(line) for line in result.stdout.split())
+    try:
+        assert module.is_relative_to(copy)
+        assert theirs != ours and theirs.parent == ours.parent
+        # the copy's stamp is its own; this tree's stamp and kernels are untouched (they were
+        # dropped before: a copy with other sources wiped the environment's one cache)
+        assert (theirs / numba_cache._STAMP).exists()
+        assert _cache_state(ours) == before
+    finally:
+        shutil.rmtree(theirs, ignore_errors=True)
 
 
 def _python(code: str, cache: Path, first: str = '', **env: str) -> subprocess.CompletedProcess:
