@@ -6,9 +6,9 @@ it, and for a wheel it is site-packages, which may be read-only. The kernels of 
 cached per environment instead, in :func:`cache_root` = ``<sys.prefix>/var/cache/conveyor_twin/
 numba/<tree>`` (a venv's prefix is the venv; ``<tree>`` names the package's source tree, so
 two checkouts run with one environment keep apart caches), one directory per source directory
-(``micro/contacts`` ...). It is the same for an editable and a wheel install, holds only what this environment's
-numba, Python and CPU compiled, survives a reinstall of the package and goes with the
-environment. ``conveyor-twin warm-up`` (``make setup`` runs it) fills it.
+(``micro/contacts`` ...). It is the same for an editable and a wheel install, holds only what
+this environment's numba, Python and CPU compiled, survives a reinstall of the package and goes
+with the environment. ``conveyor-twin warm-up`` (``make setup`` runs it) fills it.
 
 The place is given by a cache locator of this package, put first in numba's list of locators when
 ``numba.core.caching`` is imported (at once if it already is: a user may import numba before

@@ -348,11 +348,6 @@ class PlantCellNode:
         """Simulated over wall time of the stepping so far."""
         return self.stepper.real_time_factor()
 
-    def all_done(self) -> bool:
-        """True once every cell of the plant reported it completed the end step."""
-        names = [c.name for c in self.plant.cells]
-        return all(n in self.reports and self.reports[n].done for n in names)
-
     def neighbours_not_done(self) -> List[str]:
         """Return the neighbours (:meth:`neighbours`) that have not reported ``done``: a cell
         that is done may end once this is empty, since each neighbour has then heard its
