@@ -66,22 +66,31 @@ def run_activity(cell: Cell, stiffness: float, damping: float, *, seed: int, dur
     """Run the cell with the penalty model; return the activities [J] of the last ``duration``.
 
     :param settle: time run first and not counted [s] (arrival impacts, initial transients).
-    :param positions: (n, 2) initial part centres [m], given the belt's velocity.
+    :param positions: (n, 2) initial part centres [m], each given the surface velocity of the
+        belt under it (at rest off the belts).
     """
     micro = replace(cell.micro, contact=ContactModel.PENALTY, penalty_stiffness=stiffness,
                     penalty_damping=damping)
     sim = MicroSim(replace(cell, micro=micro), seed=seed, track_activity=True)
     if positions is not None and len(positions):
-        belt = cell.belts[0]
+        velocity = np.array([belt_velocity_at(cell, (float(x), float(y)))
+                             for x, y in positions]).reshape(-1, 2)
         sim.spawn(part_type, positions[:, 0], positions[:, 1], 0.0,
-                  vx=belt.speed * belt.direction[0], vy=belt.speed * belt.direction[1],
-                  strict=False)
+                  vx=velocity[:, 0], vy=velocity[:, 1], strict=False)
     dt = cell.settings.step
     if settle > 0.0:
         sim.step(int(round(settle / dt)))
         sim.acc[:] = 0.0
     sim.step(max(1, int(round(duration / dt))))
     return sim.activity()
+
+
+def belt_velocity_at(cell: Cell, point: Tuple[float, float]) -> Tuple[float, float]:
+    """Return the velocity [m/s] of the first belt under ``point`` [m] at its speed, or 0."""
+    for belt in cell.belts:
+        if belt.contains(point):
+            return belt.surface_velocity(point, belt.speed)
+    return (0.0, 0.0)
 
 
 def pick_contact_stiffness(cell: Cell, *, seed: int, duration: float,

@@ -123,9 +123,8 @@ def _on_straight(belts, b, px, py):
 
 
 @njit(cache=True, inline='always')
-def _on_curve(belts, b, px, py):
-    rx = px - belts[b, BT_CX]
-    ry = py - belts[b, BT_CY]
+def _in_sector(belts, b, rx, ry):
+    """True if the point at ``r = p - c`` [m] from curve ``b``'s centre lies on its surface."""
     r2 = rx * rx + ry * ry
     if r2 < belts[b, BT_R_IN2] or r2 > belts[b, BT_R_OUT2]:
         return False
@@ -157,7 +156,7 @@ def belt_under(belts, px, py):
     """Return the index of the first belt whose surface holds the point p [m], or -1."""
     for b in range(belts.shape[0]):
         if belts[b, BT_KIND] != KIND_STRAIGHT:
-            if _on_curve(belts, b, px, py):
+            if _in_sector(belts, b, px - belts[b, BT_CX], py - belts[b, BT_CY]):
                 return b
             continue
         if _on_straight(belts, b, px, py):
@@ -212,19 +211,24 @@ def belt_surface(belts, speed, px, py, floor_mu, h):
 
     A cell without transfer units steps through this one (no transfer lookup at all).
     """
-    b = belt_under(belts, px, py)
-    if b < 0:
-        return 0.0, 0.0, 0.0, floor_mu
-    if belts[b, BT_KIND] == KIND_STRAIGHT:
-        return speed[b] * belts[b, BT_DX], speed[b] * belts[b, BT_DY], 0.0, belts[b, BT_MU]
-    omega = speed[b] * belts[b, BT_OMEGA]
-    rx = px - belts[b, BT_CX]
-    ry = py - belts[b, BT_CY]
-    if h > 0.0:
-        s = belts[b, BT_ROT_S]
-        c = belts[b, BT_ROT_C]
-        return c * rx - s * ry, s * rx + c * ry, omega, belts[b, BT_MU]
-    return -omega * ry, omega * rx, omega, belts[b, BT_MU]
+    for b in range(belts.shape[0]):
+        if belts[b, BT_KIND] == KIND_STRAIGHT:
+            if _on_straight(belts, b, px, py):
+                return (speed[b] * belts[b, BT_DX], speed[b] * belts[b, BT_DY], 0.0,
+                        belts[b, BT_MU])
+            continue
+        rx = px - belts[b, BT_CX]
+        ry = py - belts[b, BT_CY]
+        if not _in_sector(belts, b, rx, ry):
+            continue
+        if h > 0.0:
+            s = belts[b, BT_ROT_S]
+            c = belts[b, BT_ROT_C]
+            return (c * rx - s * ry, s * rx + c * ry, speed[b] * belts[b, BT_OMEGA],
+                    belts[b, BT_MU])
+        omega = speed[b] * belts[b, BT_OMEGA]
+        return -omega * ry, omega * rx, omega, belts[b, BT_MU]
+    return 0.0, 0.0, 0.0, floor_mu
 
 
 @njit(cache=True, inline='always')

@@ -58,3 +58,30 @@ def test_impact_restitution_exact_for_impulses_step_dependent_for_springs():
     rule = 1.0 / (bench.STEPS_PER_PERIOD * f)
     e = bench.impact_restitution('penalty', rule, penalty_stiffness=1e5, penalty_damping=5.0)
     assert abs(e - res['converged_restitution']) < 0.1 * res['converged_restitution']
+
+
+def test_placed_parts_take_the_velocity_of_the_belt_under_them_on_any_belt_shape():
+    from pathlib import Path
+
+    import yaml
+
+    from conveyor_twin.cell.loader import cell_from_mapping
+    from conveyor_twin.micro.activity import belt_velocity_at, run_activity
+    path = Path(__file__).resolve().parents[2] / 'conveyor_twin/cell/examples/l_line.yaml'
+    d = yaml.safe_load(path.read_text())
+    d['belts'] = [d['belts'][1], d['belts'][0], d['belts'][2]]   # the curve first
+    d['sources'] = []
+    cell = cell_from_mapping(d)
+    assert belt_velocity_at(cell, (1.0, 0.0)) == pytest.approx((0.5, 0.0))      # infeed
+    assert belt_velocity_at(cell, (2.6, 1.5)) == pytest.approx((0.0, 0.5))      # outfeed
+    # on the bend, 0.7 m from its centre (2.0, 0.6) and 30 deg into it: omega x r with
+    # omega = 0.5 / 0.6 rad/s (the speed is given on the centre line, radius 0.6 m)
+    omega, rx, ry = 0.5 / 0.6, 0.7 * np.sin(np.pi / 6), -0.7 * np.cos(np.pi / 6)
+    assert belt_velocity_at(cell, (2.0 + rx, 0.6 + ry)) == pytest.approx((-omega * ry,
+                                                                          omega * rx))
+    assert belt_velocity_at(cell, (1.0, 1.0)) == (0.0, 0.0)                     # off the belts
+    positions = np.array([[2.0 + 0.7 * np.sin(a), 0.6 - 0.7 * np.cos(a)]
+                          for a in np.linspace(0.1, 1.2, 5)])
+    activity = run_activity(cell, cell.micro.penalty_stiffness, cell.micro.penalty_damping,
+                            seed=1, duration=0.02, positions=positions)
+    assert activity and all(np.isfinite(v) for v in activity.values())
