@@ -26,8 +26,10 @@ in the funnel); the clog probability falls from 20 of 20 runs at 1.5 d to none a
 engines and both scenes. Where it differs the twin holds its arches less: deflector 2 d 19 and
 20 of 20 stopped, passed 29 % against 14 %; deflector 2.5 d 11 against 20 of 20, 60 % against
 23 %; funnel 2.5 d 19 and 20 of 20, 24 % against 14 %; funnel 3 d 2 against 8 of 20, 92 %
-against 75 %. The twin's 200 runs take 82 s in two processes, a reference run about twenty
-times a twin run.
+against 75 %. With 60 reference seeds in those four cases the funnel at 2.5 d agrees (7 of
+10), and with 256 contact sweeps per substep instead of 16 all four agree
+(docs/validation.md). The twin's 200 runs take 82 s in two processes, a reference run about
+twenty times a twin run.
 """
 
 import argparse
