@@ -152,19 +152,6 @@ def prepare_rotations(belts, speed, h):
 
 
 @njit(cache=True, inline='always')
-def belt_under(belts, px, py):
-    """Return the index of the first belt whose surface holds the point p [m], or -1."""
-    for b in range(belts.shape[0]):
-        if belts[b, BT_KIND] != KIND_STRAIGHT:
-            if _in_sector(belts, b, px - belts[b, BT_CX], py - belts[b, BT_CY]):
-                return b
-            continue
-        if _on_straight(belts, b, px, py):
-            return b
-    return -1
-
-
-@njit(cache=True, inline='always')
 def transfer_under(transfers, position, px, py):
     """Return the row of the first engaged transfer unit whose footprint holds p [m], or -1.
 
