@@ -132,19 +132,43 @@ def test_tiny_run_of_both_engines_reports_figures_in_range(capsys):
     assert 'To, Lai and Pak' in report['literature']
 
 
+def _report(capsys, args):
+    """Run bench clog with ``args`` (and --json); return its report."""
+    assert clog.main(args + ['--json']) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def _twin_runs(report, scene, gap):
+    """Return the twin's runs of one scene and gap in a report, without their wall times."""
+    return [{k: v for k, v in run.items() if k != 'wall_s'}
+            for run in report['scenes'][scene][gap]['twin']]
+
+
 def test_parallel_jobs_give_the_same_runs(capsys):
     args = ['--scene', 'funnel', '--gaps', '3', '--seeds', '2', '--parts', '20', '--window',
-            '0.5', '--skip-pymunk', '--json']
-    assert clog.main(args) == 0
-    one = json.loads(capsys.readouterr().out)
-    assert clog.main(args + ['--jobs', '2']) == 0
-    two = json.loads(capsys.readouterr().out)
-
-    def figures(report):
-        return [{k: v for k, v in run.items() if k != 'wall_s'}
-                for run in report['scenes']['funnel']['3']['twin']]
-    assert figures(one) == figures(two) and len(figures(one)) == 2
+            '0.5', '--skip-pymunk']
+    one = _report(capsys, args)
+    two = _report(capsys, args + ['--jobs', '2'])
+    assert _twin_runs(one, 'funnel', '3') == _twin_runs(two, 'funnel', '3')
+    assert len(_twin_runs(one, 'funnel', '3')) == 2
     assert 'reference' not in one['scenes']['funnel']['3']['summary']
+
+
+def test_the_sweep_budget_reaches_the_twin_and_changes_an_arch(capsys):
+    """--sweep-budget gives the twin's solver more sweeps where an arch forms: its runs
+    change and the report names the setting."""
+    args = ['--scene', 'deflector', '--gaps', '2', '--seeds', '1', '--parts', '60', '--window',
+            '1.0', '--skip-pymunk']
+    default = _report(capsys, args)
+    budget = _report(capsys, args + ['--sweep-budget', '200000'])
+    none = _report(capsys, args + ['--sweep-budget', '0'])
+    assert default['twin_micro'] == {}
+    assert budget['twin_micro'] == {'contact_sweep_budget': 200000}
+    runs = _twin_runs(default, 'deflector', '2')
+    assert _twin_runs(budget, 'deflector', '2') != runs
+    assert _twin_runs(none, 'deflector', '2') == runs
+    with pytest.raises(SystemExit):
+        clog.main(args + ['--sweep-budget', '-1'])
 
 
 def test_wilson_interval():

@@ -51,6 +51,7 @@ DEFAULT_SEEDS = 20                  # runs per scene and gap (seeds 1..n)
 DEFAULT_PARTS = 150
 DEFAULT_WINDOW = 5.0                # s of simulated time per run
 PASSED_TOLERANCE = 0.10             # largest difference of the mean fraction passed
+CONVERGED_BUDGET = 200_000          # contact visits per substep that converge the arches
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple:
@@ -97,11 +98,12 @@ def verdict(twin: Dict, ref: Dict, tolerance: float = PASSED_TOLERANCE) -> Dict:
 
 def _one(task: tuple) -> Dict:
     """Run one seed of one engine (a worker process's job)."""
-    engine, name, gap, seed, parts, window, pymunk = task
+    engine, name, gap, seed, parts, window, settings = task
     scene = build_scene(name, gap)
     pts = scene.release(parts, seed)
     if engine == 'twin':
-        return run_twin(scene, pts, window, seed)
+        return run_twin(scene, pts, window, seed, micro=settings)
+    pymunk = settings
     return reference.run_pymunk(scene, pts, window, iterations=pymunk['iterations'],
                                 slop=pymunk['slop_m'], step=pymunk['step_s'])
 
@@ -114,18 +116,23 @@ def _run_tasks(tasks: List[tuple], pool: Optional[ProcessPoolExecutor]) -> List[
 
 def run(scenes: Sequence[str], gaps: Sequence[float], seeds: int, parts: int, window: float, *,
         twin: bool = True, pymunk: Optional[Dict] = None, ref_mode: Optional[str] = 'run',
-        ref_path: Optional[str] = None, jobs: int = 1, on_gap=None) -> Dict:
+        ref_path: Optional[str] = None, jobs: int = 1, on_gap=None,
+        twin_micro: Optional[Dict] = None) -> Dict:
     """Run the benchmark; return its report.
 
     ``ref_mode``: ``'run'`` (run pymunk), ``'load'`` (read the runs from ``ref_path``),
     ``'save'`` (run pymunk, write every run to ``ref_path`` as it comes) or None (no
-    reference). ``on_gap(scene, gap key, entry)`` is called after each gap.
+    reference). ``on_gap(scene, gap key, entry)`` is called after each gap. ``twin_micro``:
+    the twin's ``micro`` settings that differ from the scenes' cell (e.g.
+    ``{'contact_sweep_budget': 200000}``).
     """
+    twin_micro = dict(twin_micro or {})
     pymunk = pymunk or reference.settings()
     report: Dict = {'parts': parts, 'seeds': seeds, 'window_s': window,
                     'quiet_s': quiet_time(window), 'pymunk': pymunk if ref_mode else None,
                     'reference': ref_path if ref_mode in ('load', 'save') else ref_mode,
-                    'passed_tolerance': PASSED_TOLERANCE, 'scenes': {}}
+                    'passed_tolerance': PASSED_TOLERANCE, 'twin_micro': twin_micro,
+                    'scenes': {}}
     base = load_cell(None)
     report['part_diameter_m'] = 2.0 * base.part_types[0].radius
     data = None
@@ -144,7 +151,7 @@ def run(scenes: Sequence[str], gaps: Sequence[float], seeds: int, parts: int, wi
     try:
         for name, gap, scene in plan:
             entry = _gap_entry(scene, seeds, parts, window, twin, pymunk, ref_mode,
-                               stored.get((name, gap)), pool)
+                               stored.get((name, gap)), pool, twin_micro)
             if ref_mode == 'save':
                 for seed, run_ in enumerate(entry['reference'], start=1):
                     reference.add(data, scene, seed, scene.release(parts, seed), run_)
@@ -160,11 +167,12 @@ def run(scenes: Sequence[str], gaps: Sequence[float], seeds: int, parts: int, wi
 
 def _gap_entry(scene: Scene, seeds: int, parts: int, window: float, twin: bool, pymunk: Dict,
                ref_mode: Optional[str], stored: Optional[list],
-               pool: Optional[ProcessPoolExecutor]) -> Dict:
+               pool: Optional[ProcessPoolExecutor], twin_micro: Dict) -> Dict:
     entry: Dict = {'gap_m': scene.clear_width, 'pass_line_x_m': scene.pass_line,
                    'twin': [], 'reference': []}
     engines = (['twin'] if twin else []) + (['pymunk'] if ref_mode in ('run', 'save') else [])
-    tasks = [(engine, scene.name, scene.gap, seed, parts, window, pymunk)
+    tasks = [(engine, scene.name, scene.gap, seed, parts, window,
+              twin_micro if engine == 'twin' else pymunk)
              for engine in engines for seed in range(1, seeds + 1)]
     results = _run_tasks(tasks, pool)
     for task, result in zip(tasks, results):
@@ -267,6 +275,10 @@ def parser() -> argparse.ArgumentParser:
                    help='simulated time per run [s]')
     p.add_argument('--jobs', type=int, default=1, help='runs in parallel processes')
     p.add_argument('--skip-pymunk', action='store_true', help='run the twin only')
+    p.add_argument('--sweep-budget', type=int, metavar='VISITS',
+                   help="the twin's micro.contact_sweep_budget (default: the cell's, "
+                        f'{load_cell(None).micro.contact_sweep_budget}; {CONVERGED_BUDGET} '
+                        'converges the arches)')
     p.add_argument('--reference', metavar='FILE',
                    help='take the reference runs from FILE (made by --save-reference)')
     p.add_argument('--save-reference', metavar='FILE',
@@ -294,6 +306,8 @@ def main(argv: List[str]) -> int:
         p.error('--gaps positive, --seeds, --parts and --jobs at least 1, --window positive')
     if args.reference and args.save_reference:
         p.error('--reference and --save-reference exclude each other')
+    if args.sweep_budget is not None and args.sweep_budget < 0:
+        p.error('--sweep-budget: at least 0 contact visits')
     if args.skip_pymunk and (args.reference or args.save_reference or args.convergence):
         p.error('--skip-pymunk excludes --reference, --save-reference and --convergence')
     pymunk = reference.settings(args.pymunk_iterations, args.pymunk_slop, args.pymunk_step)
@@ -321,7 +335,9 @@ def main(argv: List[str]) -> int:
         report = run(_scenes(args), gaps, args.seeds, args.parts, args.window,
                      twin=not args.save_reference, pymunk=pymunk, ref_mode=mode,
                      ref_path=args.save_reference or args.reference, jobs=args.jobs,
-                     on_gap=None if args.json else on_gap)
+                     on_gap=None if args.json else on_gap,
+                     twin_micro=(None if args.sweep_budget is None
+                                 else {'contact_sweep_budget': args.sweep_budget}))
     except ValueError as err:
         print(f'conveyor-twin bench clog: {err}', file=sys.stderr)
         return 2
@@ -341,6 +357,11 @@ def _print_head(args, pymunk: Dict, mode: Optional[str]) -> None:
           'upstream (95 % Wilson interval); the twin agrees when its clog probability is inside '
           f'the reference\'s interval and its mean fraction passed within '
           f'{PASSED_TOLERANCE * 100:.0f} points')
+    if mode != 'save':
+        micro = load_cell(None).micro
+        budget = micro.contact_sweep_budget if args.sweep_budget is None else args.sweep_budget
+        print(f'twin: contact sweeps at least {micro.contact_sweeps}, a budget of {budget} '
+              f'contact visits per substep, at most {micro.contact_sweeps_max}', flush=True)
     if mode:
         source = {'run': 'run now', 'save': f'run now, saved to {args.save_reference}',
                   'load': f'from {args.reference}'}[mode]

@@ -370,12 +370,16 @@ def samples(window: float, dt: float):
         yield k, done * dt
 
 
-def run_twin(scene: Scene, positions: np.ndarray, window: float, seed: int) -> Dict:
-    """Run the twin's micro simulator on ``scene`` for ``window`` s; return the run's figures."""
+def run_twin(scene: Scene, positions: np.ndarray, window: float, seed: int,
+             micro: Optional[Dict] = None) -> Dict:
+    """Run the twin's micro simulator on ``scene`` for ``window`` s; return the run's figures.
+
+    ``micro``: settings of the cell's ``micro`` section to change (e.g. the sweep budget).
+    """
     t0 = time.perf_counter()
     cell = scene.cell
     cell = dataclasses.replace(cell, micro=dataclasses.replace(
-        cell.micro, capacity=max(len(positions), 1)))
+        cell.micro, capacity=max(len(positions), 1), **(micro or {})))
     sim = MicroSim(cell, seed=seed)
     sim.spawn(0, positions[:, 0], positions[:, 1], 0.0, vx=cell.belts[0].speed)
     watch = Watch(len(positions), scene.pass_line, cell.part_types[0].radius)

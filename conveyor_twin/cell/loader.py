@@ -18,7 +18,8 @@ from conveyor_twin.cell.errors import CellError
 from conveyor_twin.cell.loader_curves import check_rail_names, guide_rails, read_curve
 from conveyor_twin.cell.reader import check_number, check_point, COORDINATE_LIMIT, KeyReader
 from conveyor_twin.cell.model import (
-    ACTUATOR_KINDS, Actuator, AutoSwitch, Belt, Cell, CONTACT_MODELS, ContactModel, LightBarrier,
+    ACTUATOR_KINDS, Actuator, AutoSwitch, Belt, Cell, CONTACT_MODELS, CONTACT_SWEEP_BUDGET,
+    CONTACT_SWEEPS, CONTACT_SWEEPS_MAX, ContactModel, LightBarrier,
     MACRO_SCHEMES, MACRO_VARIANTS, MacroModel, MacroScheme, MacroVariant, MicroModel, Obstacle,
     OBSTACLE_KINDS, ObstacleKind, PART_SHAPES, PartType, Point, Rect, Settings, Sink, Source,
     SOURCE_PATTERNS, Zone, ZONE_POLICIES, ZonePolicy,
@@ -286,8 +287,16 @@ def _micro(r: KeyReader) -> MicroModel:
         penalty_damping=r.number('penalty_damping', 5.0, low=0.0, high=1e6),
         max_travel_fraction=r.number('max_travel_fraction', 0.5, low=0.0, high=1.0,
                                      low_open=True),
+        contact_sweeps=r.integer('contact_sweeps', CONTACT_SWEEPS, low=1, high=10_000),
+        contact_sweeps_max=r.integer('contact_sweeps_max', CONTACT_SWEEPS_MAX, low=1,
+                                     high=10_000),
+        contact_sweep_budget=r.integer('contact_sweep_budget', CONTACT_SWEEP_BUDGET, low=0,
+                                       high=1_000_000_000),
     )
     r.done()
+    if model.contact_sweeps_max < model.contact_sweeps:
+        raise r.fail('contact_sweeps_max', model.contact_sweeps_max,
+                     f'an integer at least contact_sweeps ({model.contact_sweeps})')
     return model
 
 

@@ -136,7 +136,8 @@ def cross(r: np.ndarray, v: np.ndarray) -> float:
 def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np.ndarray,
                i_inv: np.ndarray, passes: int, heat: Optional[np.ndarray] = None, *,
                h: float, tolerance: float, bounce_passes: int,
-               bounce_tolerance: float) -> List[Tuple[float, float]]:
+               bounce_tolerance: float, work: int = 0,
+               max_passes: int = 0) -> List[Tuple[float, float]]:
     """Apply the impulses of :func:`conveyor_twin.micro.contacts.impulses.prepare_contacts`,
     :func:`~conveyor_twin.micro.contacts.impulses.solve_impulses`,
     :func:`~conveyor_twin.micro.contacts.restitution.restitute` and
@@ -148,7 +149,8 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
         ``mu_s``, ``mu_k``, ``v_t``, ``bv``, ``bw``, ``depth`` (< 0: a speculative contact's
         gap) and the warm start ``ln``, ``lt`` (the previous substep's impulses, 0 for a new
         contact). :param h: the substep [s]; ``tolerance``, ``bounce_passes``,
-        ``bounce_tolerance``: the sweeps' stopping rules. :param v: (n, 2) velocities, in place.
+        ``bounce_tolerance``: the sweeps' stopping rules. :param passes: the least impulse
+        sweeps; ``work`` contact visits buy more, up to ``max_passes`` (0: ``passes`` only). :param v: (n, 2) velocities, in place.
     :param heat: (n,) what surface friction dissipated on each part in the substep [J] (the
         external work an island may turn into kinetic energy; zeros if None).
     """
@@ -238,7 +240,10 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
         acc[k] = [ln1, lt1]
         return (abs(ln1 - ln) + abs(lt1 - lt)) * inverse_mass(c, n)
 
-    sweeps(order, passes, solve, tolerance)
+    limit = passes
+    if work > 0 and contacts:
+        limit = max(passes, min(max_passes, work // len(contacts)))
+    sweeps(order, limit, solve, tolerance)
     kept = [list(a) for a in acc]      # the next substep's warm start: before the bounce
     # impacts (no warm start) of free islands (none of their loaded contacts warm started or on
     # a moving body): Poisson's restitution on their compression swept to convergence as

@@ -26,7 +26,8 @@ from conveyor_twin.micro.contacts import (A_BELT, A_COLUMNS, A_CONTACT_FRICTION,
                                           A_INERTIA, A_SPRING, MODE_IMPULSE, MODE_PENALTY,
                                           MP_COLUMNS, MP_CORRECTION, MP_DAMPING, MP_DT,
                                           MP_BOUNCE_PASSES, MP_BOUNCE_TOLERANCE,
-                                          MP_SPEC_MARGIN, MP_SPEC_MAX, MP_TOLERANCE,
+                                          MP_MAX_SWEEPS, MP_SPEC_MARGIN, MP_SPEC_MAX,
+                                          MP_SWEEP_WORK, MP_TOLERANCE,
                                           MP_FLOOR_MU, MP_GRAVITY, MP_SLOP, MP_STIFFNESS, MP_TRACK,
                                           NB_BUILDS, grid_table, neighbour_arrays, scratch)
 from conveyor_twin.micro.drive import FLOOR_FRICTION
@@ -55,11 +56,11 @@ from conveyor_twin.micro.surfaces import belt_table, BT_DV, transfer_table
 EVENT_CAPACITY = 4096
 # Penalty model: largest omega * dt of the stiffest contact (symplectic Euler is stable < 2).
 PENALTY_OMEGA_DT = 0.5
-# Impulse model: most sweeps over the contacts per substep (velocity sweeps, then as many for
-# restitution), warm-started from the previous substep's impulses; they stop earlier once no
-# contact's increment changes a relative speed by more than CONTACT_TOLERANCE [m/s] (see the
-# docstring of contacts.impulses).
-CONTACT_PASSES = 16
+# Impulse model: the velocity sweeps over the contacts, warm-started from the previous
+# substep's impulses, stop once no contact's increment changes a relative speed by more than
+# CONTACT_TOLERANCE [m/s] (see the docstring of contacts.impulses), or when the substep has
+# spent the cell's budget of contact visits (micro.contact_sweep_budget, between
+# micro.contact_sweeps and micro.contact_sweeps_max sweeps).
 CONTACT_TOLERANCE = 1e-4
 # Impulse model: the restitution sweeps (only the bouncing contacts; see contacts.restitution).
 BOUNCE_PASSES = 64
@@ -131,15 +132,18 @@ class MicroSim:
     :param auto_substeps: choose substeps for travel and penalty stability; ``False`` takes
         exactly one substep per step (to measure raw step limits).
     :param event_capacity: size of the light-barrier events buffer.
-    :param passes: impulse model: sweeps over the contacts per substep (see
-        :data:`CONTACT_PASSES`).
+    :param passes: impulse model: least sweeps over the contacts per substep; ``max_passes``
+        the most, ``sweep_work`` the contact visits per substep that buy sweeps beyond
+        ``passes`` (0: always ``passes``). ``None``: the cell's ``micro.contact_sweeps``,
+        ``contact_sweeps_max``, ``contact_sweep_budget``.
     :param position_passes: impulse model: sweeps of the penetration correction per substep
         (see :data:`POSITION_PASSES`).
     """
 
     def __init__(self, cell: Cell, *, seed: int, region: Optional[Region] = None,
                  track_activity: Optional[bool] = None, auto_substeps: bool = True,
-                 event_capacity: int = EVENT_CAPACITY, passes: int = CONTACT_PASSES,
+                 event_capacity: int = EVENT_CAPACITY, passes: Optional[int] = None,
+                 max_passes: Optional[int] = None, sweep_work: Optional[int] = None,
                  position_passes: int = POSITION_PASSES) -> None:
         micro = cell.micro
         self.cell = cell
@@ -169,6 +173,10 @@ class MicroSim:
             self.mp[MP_TOLERANCE] = CONTACT_TOLERANCE
             self.mp[MP_BOUNCE_TOLERANCE] = BOUNCE_TOLERANCE
             self.mp[MP_BOUNCE_PASSES] = BOUNCE_PASSES
+            self.mp[MP_SWEEP_WORK] = max(0, int(micro.contact_sweep_budget if sweep_work is None
+                                                else sweep_work))
+            self.mp[MP_MAX_SWEEPS] = max(1, int(micro.contact_sweeps_max if max_passes is None
+                                                else max_passes))
         self.cfg = np.zeros(CF_COLUMNS)
         self.cfg[CF_DT] = self.dt
         self.cfg[CF_MODE] = MODE_PENALTY if penalty else MODE_IMPULSE
@@ -178,7 +186,7 @@ class MicroSim:
                                                   micro.penalty_damping)
         self.cfg[CF_MAX_SUB] = MAX_SUBSTEPS_PENALTY if penalty else MAX_SUBSTEPS_IMPULSE
         self.cfg[CF_FLOOR_MU] = FLOOR_FRICTION
-        self.cfg[CF_PASSES] = max(1, int(passes))
+        self.cfg[CF_PASSES] = max(1, int(micro.contact_sweeps if passes is None else passes))
         self.cfg[CF_POSITION_PASSES] = max(1, int(position_passes))
         self.cfg[CF_SKIN] = SKIN_FRACTION * r_min
         # belts

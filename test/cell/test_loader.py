@@ -119,6 +119,10 @@ def test_unknown_part_type_in_source(tmp_path: Path, default_doc: dict) -> None:
     (lambda d: d['macro'].update(cfl=1.5), 'macro.cfl'),
     (lambda d: d['micro'].update(capacity=0), 'micro.capacity'),
     (lambda d: d['micro'].update(capacity=True), 'micro.capacity'),
+    (lambda d: d['micro'].update(contact_sweeps=0), 'micro.contact_sweeps'),
+    (lambda d: d['micro'].update(contact_sweep_budget=-1), 'micro.contact_sweep_budget'),
+    (lambda d: d['micro'].update(contact_sweeps=20, contact_sweeps_max=10),
+     'micro.contact_sweeps_max'),
     (lambda d: d.update(belts=[]), 'belts'),
 ])
 def test_out_of_range_and_malformed_values(tmp_path: Path, default_doc: dict, mutate,

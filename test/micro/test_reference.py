@@ -1,5 +1,6 @@
 """The compiled contact kernel against the slow reference."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -7,13 +8,15 @@ import pytest
 
 from conveyor_twin.micro import MicroSim
 from conveyor_twin.micro.collide import box_vertices, collide
+from conveyor_twin.micro.contacts.impulses import sweep_limit
 from conveyor_twin.micro.contacts import (CT_BVX, CT_BVY, CT_BW, CT_E, CT_KA, CT_KB, CT_MU_K,
                                           CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX, CT_RBY,
                                           CT_DEPTH, CT_V_T, detect, limit_energy, MP_DT,
-                                          MP_BOUNCE_PASSES, MP_BOUNCE_TOLERANCE, MP_SPEC_MAX,
-                                          MP_TOLERANCE, prepare_contacts, PV_KA, PV_KB, PV_LN,
+                                          MP_BOUNCE_PASSES, MP_BOUNCE_TOLERANCE, MP_MAX_SWEEPS,
+                                          MP_SPEC_MAX, MP_SWEEP_WORK, MP_TOLERANCE,
+                                          prepare_contacts, PV_KA, PV_KB, PV_LN,
                                           PV_LT, restitute, solve_impulses, update_pairs)
-from conveyor_twin.micro.kernel import CF_SKIN
+from conveyor_twin.micro.kernel import CF_PASSES, CF_SKIN
 from conveyor_twin.micro.reference import box_core, collide_ref, sweeps_ref
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
 from test.micro.conftest import box, disc, make_cell, wall
@@ -61,7 +64,10 @@ def test_near_phase_matches_reference(kinds):
     assert touching > 50
 
 
-def test_impulse_sweeps_match_reference():
+@pytest.mark.parametrize('budget', ['fixed', 'work'])
+def test_impulse_sweeps_match_reference(budget):
+    """``fixed``: 3 sweeps or the tolerance; ``work``: a budget of 6 sweeps' visits, no
+    tolerance, so the sweeps the budget buys beyond the 3 count."""
     cell = make_cell(part_types=(disc(restitution=0.4, mu_s=0.3, mu_k=0.2),
                                  box(length=0.016, width=0.008)),
                      obstacles=(wall('w', (0.2, -0.1), (0.4, -0.1), thickness=0.004),))
@@ -108,16 +114,24 @@ def test_impulse_sweeps_match_reference():
     # the energy an island may gain (surface friction's heat), here below 0 on some parts so
     # that the limit acts on some islands and not on others (the arithmetic is the same)
     heat = rng.uniform(-1e-4, 1e-5, size=n)
-    mp = sim.mp
+    mp = sim.mp.copy()
+    mp[MP_SWEEP_WORK] = 0.0
+    if budget == 'work':
+        mp[MP_SWEEP_WORK] = 6 * nc + 1
+        mp[MP_MAX_SWEEPS] = 256
+        mp[MP_TOLERANCE] = 0.0
     impulses = sweeps_ref(contacts, v, w, sim.pt[types, PT_INV_MASS],
                           sim.pt[types, PT_INV_INERTIA], passes=3, heat=heat, h=mp[MP_DT],
                           tolerance=mp[MP_TOLERANCE], bounce_passes=int(mp[MP_BOUNCE_PASSES]),
-                          bounce_tolerance=mp[MP_BOUNCE_TOLERANCE])
+                          bounce_tolerance=mp[MP_BOUNCE_TOLERANCE],
+                          work=int(mp[MP_SWEEP_WORK]), max_passes=int(mp[MP_MAX_SWEEPS]))
     v0 = (vx[:n].copy(), vy[:n].copy(), wz[:n].copy())
     found, bounces = prepare_contacts(nc, ct, cidx, s.part_type, sim.pt, mp, vx, vy, wz, *v0,
                                       prev)
     assert found == len(warm)
-    solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, mp, sim.acc, prev)
+    sweeps = solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, mp, sim.acc,
+                            prev)
+    assert sweeps == 6 if budget == 'work' else sweeps <= 3
     assert bounces > 0
     restitute(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, mp, contact_arrays[7], prev)
     scaled = limit_energy(n, nc, s.part_type, sim.pt, (vx, vy, wz), v0, heat,
@@ -129,3 +143,24 @@ def test_impulse_sweeps_match_reference():
     assert prev[:nc, PV_LN] == pytest.approx([i[0] for i in impulses], abs=1e-15)
     assert prev[:nc, PV_LT] == pytest.approx([i[1] for i in impulses], abs=1e-15)
     assert np.array_equal(prev[:nc, PV_KA], ct[:nc, CT_KA])
+
+
+def test_sweep_limit_spends_the_work_budget():
+    """Few contacts get sweeps up to the most, many the least; no budget: the least."""
+    mp = np.zeros(MP_MAX_SWEEPS + 1)
+    mp[MP_SWEEP_WORK] = 100_000
+    mp[MP_MAX_SWEEPS] = 256
+    assert [sweep_limit(nc, 16, mp) for nc in (0, 1, 100, 390, 391, 1000, 6250, 6251, 50_000)] \
+        == [16, 256, 256, 256, 255, 100, 16, 16, 16]
+    mp[MP_SWEEP_WORK] = 0.0
+    assert sweep_limit(100, 16, mp) == 16
+
+
+def test_the_cell_sets_the_sweep_budget_and_arguments_override_it():
+    cell = make_cell(part_types=(disc(),))
+    cell = dataclasses.replace(cell, micro=dataclasses.replace(
+        cell.micro, contact_sweeps=8, contact_sweeps_max=64, contact_sweep_budget=5000))
+    sim = MicroSim(cell, seed=0)
+    assert (sim.cfg[CF_PASSES], sim.mp[MP_MAX_SWEEPS], sim.mp[MP_SWEEP_WORK]) == (8, 64, 5000)
+    sim = MicroSim(cell, seed=0, passes=3, max_passes=4, sweep_work=0)
+    assert (sim.cfg[CF_PASSES], sim.mp[MP_MAX_SWEEPS], sim.mp[MP_SWEEP_WORK]) == (3, 4, 0)

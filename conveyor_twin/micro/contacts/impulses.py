@@ -51,8 +51,8 @@ from conveyor_twin.micro.contacts.tables import (A_CONTACT_FRICTION, CT_BOUNCE, 
                                                  CT_MU_S, CT_NX, CT_NY, CT_RAX, CT_RAY, CT_RBX,
                                                  CT_RBY, CT_KN, CT_SLOPE, CT_TARGET, CT_V_T, CT_WA,
                                                  CT_WB, MP_CORRECTION, MP_DT, MP_SLOP,
-                                                 MP_TOLERANCE, MP_TRACK, PV_KA, PV_KB, PV_LN,
-                                                 PV_LT)
+                                                 MP_MAX_SWEEPS, MP_SWEEP_WORK, MP_TOLERANCE,
+                                                 MP_TRACK, PV_KA, PV_KB, PV_LN, PV_LT)
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
 
 
@@ -245,11 +245,26 @@ def prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz, v0x, v0y, w0, prev
     return found, bounces
 
 
+@njit(cache=True, inline='always')
+def sweep_limit(nc, passes, mp):
+    """Return the most impulse sweeps of a substep with ``nc`` contacts.
+
+    As many sweeps over the ``nc`` contacts as ``mp[MP_SWEEP_WORK]`` contact visits pay for, at
+    least ``passes`` and at most ``mp[MP_MAX_SWEEPS]``; ``passes`` alone without a budget
+    (``MP_SWEEP_WORK`` 0). The limit depends on the number of contacts only, so the same inputs
+    give the same sweeps.
+    """
+    work = mp[MP_SWEEP_WORK]
+    if work <= 0.0 or nc == 0:
+        return passes
+    return max(passes, min(int(mp[MP_MAX_SWEEPS]), int(work) // nc))
+
+
 @njit(cache=True)
 def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
     """Apply the contacts' impulses in sweeps after the warm start of :func:`prepare_contacts`
     until no contact's increment changes a relative speed by more than ``mp[MP_TOLERANCE]``
-    [m/s], at most ``passes`` sweeps; keep the keys and accumulated impulses in ``prev`` for
+    [m/s], at most as many sweeps as :func:`sweep_limit` allows (``passes`` at least); keep the keys and accumulated impulses in ``prev`` for
     the next substep. Return the number of sweeps.
 
     Sequential impulses with accumulated impulses (Catto; Erleben's projected Gauss-Seidel):
@@ -273,8 +288,9 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
     track = mp[MP_TRACK] != 0.0
     tol = mp[MP_TOLERANCE]
     pairs, half, visits = sweep_plan(nc, cidx)
+    sweeps = sweep_limit(nc, passes, mp)
     done = 0
-    for it in range(passes):
+    for it in range(sweeps):
         residual = 0.0
         for kk in range(visits):
             k = kk if it % 2 == 0 else visits - 1 - kk

@@ -18,7 +18,9 @@ MP_SPEC_MAX = 9       # speculative contacts: largest gap recorded [m] (0: touch
 MP_TOLERANCE = 10     # impulse sweeps end when no increment changed a relative speed more [m/s]
 MP_BOUNCE_TOLERANCE = 11  # the same for the restitution sweeps [m/s]
 MP_BOUNCE_PASSES = 12     # most restitution sweeps per substep
-MP_COLUMNS = 13
+MP_SWEEP_WORK = 13    # impulse sweeps: contact visits a substep may spend (0: no budget) [-]
+MP_MAX_SWEEPS = 14    # impulse sweeps: most per substep, however few the contacts [-]
+MP_COLUMNS = 15
 
 # --- activity slots [J] (Rideout and Stein: integral of |power| dt per element class) ---
 A_SPRING = 0
