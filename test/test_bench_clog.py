@@ -173,6 +173,8 @@ def test_the_sweep_budget_reaches_the_twin_and_changes_an_arch(capsys):
 
 def test_wilson_interval():
     assert clog.wilson(0, 10)[0] == 0.0 and clog.wilson(10, 10)[1] == 1.0
+    for n in range(1, 200):   # exactly, at every n (at 60 the formula gives 1 - 1e-16)
+        assert clog.wilson(n, n)[1] == 1.0 and clog.wilson(0, n)[0] == 0.0
     lo, hi = clog.wilson(5, 10)
     assert lo < 0.5 < hi and lo == pytest.approx(1.0 - hi)
     assert clog.wilson(1, 10) == pytest.approx(tuple(1.0 - b for b in clog.wilson(9, 10)[::-1]))

@@ -27,8 +27,10 @@ engines and both scenes. Where it differs the twin holds its arches less: deflec
 20 of 20 stopped, passed 29 % against 14 %; deflector 2.5 d 11 against 20 of 20, 60 % against
 23 %; funnel 2.5 d 19 and 20 of 20, 24 % against 14 %; funnel 3 d 2 against 8 of 20, 92 %
 against 75 %. With 60 reference seeds in those four cases the funnel at 2.5 d agrees (7 of
-10), and with 256 contact sweeps per substep instead of 16 all four agree
-(docs/validation.md). The twin's 200 runs take 82 s in two processes, a reference run about
+10). ``--sweep-budget 200000`` (the cell's ``micro.contact_sweep_budget``: up to 512 sweeps
+per substep where contacts are few) makes all ten agree, with 60 seeds in those four cases
+(deflector 2.5 d: 53 of 60 stopped against 55, passed 33 % against 35 %; docs/validation.md).
+The twin's 200 runs take 57 s in two processes (100 s with that budget), a reference run about
 twenty times a twin run.
 """
 
@@ -62,7 +64,9 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple:
     denom = 1.0 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))
+    # the bounds at 0 and n successes are exactly 0 and 1 (in floats centre + half may fall
+    # short of 1, and a twin that clogs every run would lie outside the interval)
+    return (0.0 if k == 0 else max(0.0, centre - half), 1.0 if k == n else min(1.0, centre + half))
 
 
 def summary(runs: Sequence[Dict]) -> Dict:

@@ -150,7 +150,8 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
         gap) and the warm start ``ln``, ``lt`` (the previous substep's impulses, 0 for a new
         contact). :param h: the substep [s]; ``tolerance``, ``bounce_passes``,
         ``bounce_tolerance``: the sweeps' stopping rules. :param passes: the least impulse
-        sweeps; ``work`` contact visits buy more, up to ``max_passes`` (0: ``passes`` only). :param v: (n, 2) velocities, in place.
+        sweeps; ``work`` contact visits buy more, up to ``max_passes`` (0: ``passes`` only).
+    :param v: (n, 2) velocities, in place.
     :param heat: (n,) what surface friction dissipated on each part in the substep [J] (the
         external work an island may turn into kinetic energy; zeros if None).
     """

@@ -14,7 +14,8 @@ Gauss-Seidel) in the arrangement of Box2D v3's solver, per substep:
    a speculative contact (recorded by the near phase before the bodies touch: the gap closes
    exactly within the substep), the accumulated tangential impulse clamped to the Coulomb cone
    ``mu(|u_t|)`` times the normal one (Horváth et al.'s speed-dependent coefficient); until no
-   increment changes a relative speed by more than a tolerance, at most a fixed number;
+   increment changes a relative speed by more than a tolerance, at most a fixed number
+   (:func:`sweep_limit`: or as many as a budget of contact visits buys);
 3. :func:`~.restitution.restitute`: restitution in a pass of its own: Poisson's, on their
    compression swept to convergence, for the new impacts of islands neither held from the
    substep before nor driven by an actuator (so impacts that happen at once keep their
@@ -264,8 +265,9 @@ def sweep_limit(nc, passes, mp):
 def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
     """Apply the contacts' impulses in sweeps after the warm start of :func:`prepare_contacts`
     until no contact's increment changes a relative speed by more than ``mp[MP_TOLERANCE]``
-    [m/s], at most as many sweeps as :func:`sweep_limit` allows (``passes`` at least); keep the keys and accumulated impulses in ``prev`` for
-    the next substep. Return the number of sweeps.
+    [m/s], at most as many sweeps as :func:`sweep_limit` allows (``passes`` at least); keep
+    the keys and accumulated impulses in ``prev`` for the next substep. Return the number of
+    sweeps.
 
     Sequential impulses with accumulated impulses (Catto; Erleben's projected Gauss-Seidel):
     every impulse acts on both bodies of its contact, equal and opposite, at the contact point
