@@ -154,21 +154,25 @@ def test_parallel_jobs_give_the_same_runs(capsys):
     assert 'reference' not in one['scenes']['funnel']['3']['summary']
 
 
-def test_the_sweep_budget_reaches_the_twin_and_changes_an_arch(capsys):
-    """--sweep-budget gives the twin's solver more sweeps where an arch forms: its runs
-    change and the report names the setting."""
+def test_the_sweep_settings_reach_the_twin_and_change_an_arch(capsys):
+    """--sweep-budget and --sweep-tolerance set the twin's solver where an arch forms: the
+    cell's own values change nothing, others change the runs, and the report names them."""
     args = ['--scene', 'deflector', '--gaps', '2', '--seeds', '1', '--parts', '60', '--window',
             '1.0', '--skip-pymunk']
     default = _report(capsys, args)
-    budget = _report(capsys, args + ['--sweep-budget', '200000'])
-    none = _report(capsys, args + ['--sweep-budget', '0'])
+    same = _report(capsys, args + ['--sweep-budget', '200000', '--sweep-tolerance', '3e-4'])
+    fixed = _report(capsys, args + ['--sweep-budget', '0'])
+    tight = _report(capsys, args + ['--sweep-tolerance', '1e-5'])
     assert default['twin_micro'] == {}
-    assert budget['twin_micro'] == {'contact_sweep_budget': 200000}
+    assert same['twin_micro'] == {'contact_sweep_budget': 200000, 'contact_tolerance': 3e-4}
     runs = _twin_runs(default, 'deflector', '2')
-    assert _twin_runs(budget, 'deflector', '2') != runs
-    assert _twin_runs(none, 'deflector', '2') == runs
-    with pytest.raises(SystemExit):
-        clog.main(args + ['--sweep-budget', '-1'])
+    assert _twin_runs(same, 'deflector', '2') == runs
+    assert _twin_runs(fixed, 'deflector', '2') != runs
+    assert _twin_runs(tight, 'deflector', '2') != runs
+    for bad in (['--sweep-budget', '-1'], ['--sweep-tolerance', '-1e-4'],
+                ['--sweep-tolerance', '0.5']):
+        with pytest.raises(SystemExit):
+            clog.main(args + bad)
 
 
 def test_wilson_interval():

@@ -20,21 +20,17 @@ part's static and sliding values both their mean); ``--save-reference FILE`` run
 keeps its per-run results, ``--reference FILE`` uses them instead of running it again,
 ``--convergence`` runs it at 0.125 ms steps and at 200 iterations as well.
 
-Measured (20 seeds, 150 parts, 5 s, against a reference at 0.25 ms whose clogging agrees with
-0.125 ms): the twin agrees in 6 of the 10 cases (1.5, 3 and 4 d at the deflector; 1.5, 2 and 4 d
-in the funnel); the clog probability falls from 20 of 20 runs at 1.5 d to none at 4 d in both
-engines and both scenes. Where it differs the twin holds its arches less: deflector 2 d 19 and
-20 of 20 stopped, passed 29 % against 14 %; deflector 2.5 d 11 against 20 of 20, 60 % against
-23 %; funnel 2.5 d 19 and 20 of 20, 24 % against 14 %; funnel 3 d 2 against 8 of 20, 92 %
-against 75 %. With 60 reference seeds in those four cases the funnel at 2.5 d agrees (7 of
-10). ``--sweep-budget 200000`` (the cell's ``micro.contact_sweep_budget``: up to 512 sweeps
-per substep where contacts are few) makes all ten agree, with 60 seeds in those four cases
-(deflector 2.5 d: 53 of 60 stopped against 55, passed 33 % against 35 %; docs/validation.md).
-The twin's 200 runs take 57 s in two processes (100 s with that budget), a reference run about
-twenty times a twin run.
+Measured (150 parts, 5 s, 20 seeds and 60 in the four cases at 2-3 d whose clog probability is
+neither 0 nor 1, against a reference at 0.25 ms whose clogging agrees with 0.125 ms): the twin
+agrees in all 10 cases; the clog probability falls from 20 of 20 runs at 1.5 d to none at 4 d
+in both engines and both scenes (closest: deflector 2.5 d, 50 of 60 stopped against 55, passed
+35 % against 35 %; docs/validation.md). With ``--sweep-budget 0 --sweep-tolerance 1e-4`` (at
+most 16 sweeps per substep) it agrees in 7 of 10 and holds its arches less at 2-3 d. The twin's
+200 runs of 20 seeds take 71 s in two processes, a reference run about twenty twin runs.
 """
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -47,13 +43,13 @@ import numpy as np
 from conveyor_twin.bench import clog_reference as reference
 from conveyor_twin.bench.clog_scenes import SCENES, Scene, build_scene, quiet_time, run_twin
 from conveyor_twin.cell import load_cell
+from conveyor_twin.cell.model import MicroModel
 
 DEFAULT_GAPS = (1.5, 2, 2.5, 3, 4)  # clear width of the gap [part diameters]
 DEFAULT_SEEDS = 20                  # runs per scene and gap (seeds 1..n)
 DEFAULT_PARTS = 150
 DEFAULT_WINDOW = 5.0                # s of simulated time per run
 PASSED_TOLERANCE = 0.10             # largest difference of the mean fraction passed
-CONVERGED_BUDGET = 200_000          # contact visits per substep that converge the arches
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple:
@@ -128,7 +124,7 @@ def run(scenes: Sequence[str], gaps: Sequence[float], seeds: int, parts: int, wi
     ``'save'`` (run pymunk, write every run to ``ref_path`` as it comes) or None (no
     reference). ``on_gap(scene, gap key, entry)`` is called after each gap. ``twin_micro``:
     the twin's ``micro`` settings that differ from the scenes' cell (e.g.
-    ``{'contact_sweep_budget': 200000}``).
+    ``{'contact_sweep_budget': 0}``).
     """
     twin_micro = dict(twin_micro or {})
     pymunk = pymunk or reference.settings()
@@ -281,8 +277,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--skip-pymunk', action='store_true', help='run the twin only')
     p.add_argument('--sweep-budget', type=int, metavar='VISITS',
                    help="the twin's micro.contact_sweep_budget (default: the cell's, "
-                        f'{load_cell(None).micro.contact_sweep_budget}; {CONVERGED_BUDGET} '
-                        'converges the arches)')
+                        f'{MicroModel.contact_sweep_budget})')
+    p.add_argument('--sweep-tolerance', type=float, metavar='M/S',
+                   help="the twin's micro.contact_tolerance (default: the cell's, "
+                        f'{MicroModel.contact_tolerance:g} m/s)')
     p.add_argument('--reference', metavar='FILE',
                    help='take the reference runs from FILE (made by --save-reference)')
     p.add_argument('--save-reference', metavar='FILE',
@@ -312,6 +310,8 @@ def main(argv: List[str]) -> int:
         p.error('--reference and --save-reference exclude each other')
     if args.sweep_budget is not None and args.sweep_budget < 0:
         p.error('--sweep-budget: at least 0 contact visits')
+    if args.sweep_tolerance is not None and not 0.0 <= args.sweep_tolerance <= 0.1:
+        p.error('--sweep-tolerance: 0..0.1 m/s')
     if args.skip_pymunk and (args.reference or args.save_reference or args.convergence):
         p.error('--skip-pymunk excludes --reference, --save-reference and --convergence')
     pymunk = reference.settings(args.pymunk_iterations, args.pymunk_slop, args.pymunk_step)
@@ -340,8 +340,7 @@ def main(argv: List[str]) -> int:
                      twin=not args.save_reference, pymunk=pymunk, ref_mode=mode,
                      ref_path=args.save_reference or args.reference, jobs=args.jobs,
                      on_gap=None if args.json else on_gap,
-                     twin_micro=(None if args.sweep_budget is None
-                                 else {'contact_sweep_budget': args.sweep_budget}))
+                     twin_micro=_twin_micro(args))
     except ValueError as err:
         print(f'conveyor-twin bench clog: {err}', file=sys.stderr)
         return 2
@@ -355,6 +354,16 @@ def main(argv: List[str]) -> int:
     return 0
 
 
+def _twin_micro(args) -> Dict:
+    """Return the twin's ``micro`` settings that the options change."""
+    micro = {}
+    if args.sweep_budget is not None:
+        micro['contact_sweep_budget'] = args.sweep_budget
+    if args.sweep_tolerance is not None:
+        micro['contact_tolerance'] = args.sweep_tolerance
+    return micro
+
+
 def _print_head(args, pymunk: Dict, mode: Optional[str]) -> None:
     print(f'{args.parts} parts, {args.seeds} seeds per scene and gap, {args.window:g} s '
           f'window; stopped: no passage in the last {quiet_time(args.window):g} s with parts '
@@ -362,10 +371,11 @@ def _print_head(args, pymunk: Dict, mode: Optional[str]) -> None:
           f'the reference\'s interval and its mean fraction passed within '
           f'{PASSED_TOLERANCE * 100:.0f} points')
     if mode != 'save':
-        micro = load_cell(None).micro
-        budget = micro.contact_sweep_budget if args.sweep_budget is None else args.sweep_budget
-        print(f'twin: contact sweeps at least {micro.contact_sweeps}, a budget of {budget} '
-              f'contact visits per substep, at most {micro.contact_sweeps_max}', flush=True)
+        micro = dataclasses.replace(MicroModel(), **_twin_micro(args))
+        print(f'twin: contact sweeps at least {micro.contact_sweeps}, a budget of '
+              f'{micro.contact_sweep_budget} contact visits per substep, at most '
+              f'{micro.contact_sweeps_max}, to a tolerance of {micro.contact_tolerance:g} m/s',
+              flush=True)
     if mode:
         source = {'run': 'run now', 'save': f'run now, saved to {args.save_reference}',
                   'load': f'from {args.reference}'}[mode]

@@ -399,14 +399,16 @@ class ContactModel(Mode):
 
 CONTACT_MODELS = tuple(c.value for c in ContactModel)
 
-# Impulse model: velocity sweeps per substep (see docs/models.md, Contacts). They stop at a
-# tolerance, or once the substep has spent CONTACT_SWEEP_BUDGET contact visits: at least
-# CONTACT_SWEEPS sweeps, at most CONTACT_SWEEPS_MAX. No budget by default: 16 sweeps keep the
-# realtime step short; a budget of 200,000 visits converges arches at bottlenecks (their
-# clogging statistics then agree with a converged reference) at the cost of long steps.
+# Impulse model: velocity sweeps per substep (see docs/models.md, Contacts). They stop once no
+# contact's increment changes a relative speed by more than CONTACT_TOLERANCE [m/s], or once the
+# substep has spent CONTACT_SWEEP_BUDGET contact visits: at least CONTACT_SWEEPS sweeps, at most
+# CONTACT_SWEEPS_MAX. The budget converges arches at bottlenecks (a few hundred contacts: their
+# clogging statistics agree with a converged reference); the tolerance ends the sweeps of a
+# slowly queueing jam after a few, which keeps the realtime step short.
 CONTACT_SWEEPS = 16
 CONTACT_SWEEPS_MAX = 512
-CONTACT_SWEEP_BUDGET = 0
+CONTACT_SWEEP_BUDGET = 200_000
+CONTACT_TOLERANCE = 3e-4
 
 
 @dataclass(frozen=True)
@@ -425,6 +427,8 @@ class MicroModel:
     :param contact_sweeps_max: impulse model: most sweeps per substep.
     :param contact_sweep_budget: impulse model: contact visits per substep that buy sweeps
         beyond ``contact_sweeps`` (up to ``contact_sweeps_max``); 0: ``contact_sweeps`` only.
+    :param contact_tolerance: impulse model: the sweeps stop once no contact's increment changes
+        a relative speed by more than this [m/s] (0: they always run to their limit).
     """
 
     contact: ContactModel = ContactModel.IMPULSE
@@ -437,6 +441,7 @@ class MicroModel:
     contact_sweeps: int = CONTACT_SWEEPS
     contact_sweeps_max: int = CONTACT_SWEEPS_MAX
     contact_sweep_budget: int = CONTACT_SWEEP_BUDGET
+    contact_tolerance: float = CONTACT_TOLERANCE
 
 
 class MacroVariant(Mode):

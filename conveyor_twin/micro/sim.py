@@ -56,12 +56,6 @@ from conveyor_twin.micro.surfaces import belt_table, BT_DV, transfer_table
 EVENT_CAPACITY = 4096
 # Penalty model: largest omega * dt of the stiffest contact (symplectic Euler is stable < 2).
 PENALTY_OMEGA_DT = 0.5
-# Impulse model: the velocity sweeps over the contacts, warm-started from the previous
-# substep's impulses, stop once no contact's increment changes a relative speed by more than
-# CONTACT_TOLERANCE [m/s] (see the docstring of contacts.impulses), or when the substep has
-# spent the cell's budget of contact visits (micro.contact_sweep_budget, between
-# micro.contact_sweeps and micro.contact_sweeps_max sweeps).
-CONTACT_TOLERANCE = 1e-4
 # Impulse model: the restitution sweeps (only the bouncing contacts; see contacts.restitution).
 BOUNCE_PASSES = 64
 BOUNCE_TOLERANCE = 1e-12
@@ -135,7 +129,9 @@ class MicroSim:
     :param passes: impulse model: least sweeps over the contacts per substep; ``max_passes``
         the most, ``sweep_work`` the contact visits per substep that buy sweeps beyond
         ``passes`` (0: always ``passes``). ``None``: the cell's ``micro.contact_sweeps``,
-        ``contact_sweeps_max``, ``contact_sweep_budget``.
+        ``contact_sweeps_max``, ``contact_sweep_budget``. ``tolerance`` [m/s]: the sweeps stop
+        once no contact's increment changes a relative speed by more (``None``: the cell's
+        ``micro.contact_tolerance``; see :func:`~.contacts.impulses.solve_impulses`).
     :param position_passes: impulse model: sweeps of the penetration correction per substep
         (see :data:`POSITION_PASSES`).
     """
@@ -144,6 +140,7 @@ class MicroSim:
                  track_activity: Optional[bool] = None, auto_substeps: bool = True,
                  event_capacity: int = EVENT_CAPACITY, passes: Optional[int] = None,
                  max_passes: Optional[int] = None, sweep_work: Optional[int] = None,
+                 tolerance: Optional[float] = None,
                  position_passes: int = POSITION_PASSES) -> None:
         micro = cell.micro
         self.cell = cell
@@ -170,7 +167,8 @@ class MicroSim:
         if not penalty:
             self.mp[MP_SPEC_MARGIN] = SPECULATIVE_MARGIN * r_min
             self.mp[MP_SPEC_MAX] = SPECULATIVE_MAX * r_min
-            self.mp[MP_TOLERANCE] = CONTACT_TOLERANCE
+            self.mp[MP_TOLERANCE] = float(micro.contact_tolerance if tolerance is None
+                                          else tolerance)
             self.mp[MP_BOUNCE_TOLERANCE] = BOUNCE_TOLERANCE
             self.mp[MP_BOUNCE_PASSES] = BOUNCE_PASSES
             self.mp[MP_SWEEP_WORK] = max(0, int(micro.contact_sweep_budget if sweep_work is None

@@ -442,7 +442,7 @@ def test_the_l_line_example_is_an_l_with_a_railed_curve_sensors_and_one_zone(cap
 
 #: sha256 (16 hex digits) of each shipped straight cell's model without the fields added for
 #: curves and transfer units (``curve``, ``surface_speed``, ``force_limit``) and the contact
-#: sweeps (``contact_sweeps*``, at their defaults), as loaded before they existed: straight
+#: sweeps (``contact_sweeps*``, ``contact_tolerance``, at their defaults), as loaded before they existed: straight
 #: cells load exactly as before.
 STRAIGHT_CELLS = {
     None: '1ef353f40d37dbc8',
@@ -452,7 +452,7 @@ STRAIGHT_CELLS = {
     'examples/sorting.yaml': 'ec5b1295a8987456',
 }
 NEW_FIELDS = {'curve', 'surface_speed', 'force_limit', 'contact_sweeps', 'contact_sweeps_max',
-              'contact_sweep_budget'}
+              'contact_sweep_budget', 'contact_tolerance'}
 
 
 def _plain(value: Any) -> Any:
@@ -469,7 +469,8 @@ def test_straight_cells_load_exactly_as_before(name: Optional[str]) -> None:
     cell = load_cell(EXAMPLES.parent / name if name else None)
     assert all(b.curve is None for b in cell.belts)
     assert all(a.surface_speed == 0.0 for a in cell.actuators)
-    assert (cell.micro.contact_sweeps, cell.micro.contact_sweep_budget) == (16, 0)
+    assert (cell.micro.contact_sweeps, cell.micro.contact_sweep_budget,
+            cell.micro.contact_tolerance) == (16, 200_000, 3e-4)
     plain = _plain(cell)
     plain['source_file'] = ''
     if name is None:

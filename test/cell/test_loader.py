@@ -121,6 +121,8 @@ def test_unknown_part_type_in_source(tmp_path: Path, default_doc: dict) -> None:
     (lambda d: d['micro'].update(capacity=True), 'micro.capacity'),
     (lambda d: d['micro'].update(contact_sweeps=0), 'micro.contact_sweeps'),
     (lambda d: d['micro'].update(contact_sweep_budget=-1), 'micro.contact_sweep_budget'),
+    (lambda d: d['micro'].update(contact_tolerance=-1e-4), 'micro.contact_tolerance'),
+    (lambda d: d['micro'].update(contact_tolerance=0.5), 'micro.contact_tolerance'),
     (lambda d: d['micro'].update(contact_sweeps=20, contact_sweeps_max=10),
      'micro.contact_sweeps_max'),
     (lambda d: d.update(belts=[]), 'belts'),

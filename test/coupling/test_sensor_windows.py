@@ -12,7 +12,7 @@ through the deflector gap. Method and measurements: docs/validation.md. In short
   is 2 x (1 + gaps wider than the beam), the gaps being the few parts trickling through the gap
   before the jam closes it and the last ones after it dissolves. In pure micro these are
   chaotic: a 1e-12 change of the belt speed or a 1e-9 m shift of the spawn positions changes
-  them (seed 1: 18 edges, 16 and 20 perturbed; 16..36 over seeds). Pure micro does not
+  them (by several edges; 14..18 over seeds 1..8). Pure micro does not
   reproduce its own count; "identical" cannot hold there. Multi-scale is compared
   statistically.
 * No density enters a sensor window: the density of the jam (or of a tile that turned micro)

@@ -14,8 +14,8 @@ Gauss-Seidel) in the arrangement of Box2D v3's solver, per substep:
    a speculative contact (recorded by the near phase before the bodies touch: the gap closes
    exactly within the substep), the accumulated tangential impulse clamped to the Coulomb cone
    ``mu(|u_t|)`` times the normal one (Horváth et al.'s speed-dependent coefficient); until no
-   increment changes a relative speed by more than a tolerance, at most a fixed number
-   (:func:`sweep_limit`: or as many as a budget of contact visits buys);
+   increment changes a relative speed by more than the cell's tolerance, at most as many
+   sweeps as its budget of contact visits buys (:func:`sweep_limit`);
 3. :func:`~.restitution.restitute`: restitution in a pass of its own: Poisson's, on their
    compression swept to convergence, for the new impacts of islands neither held from the
    substep before nor driven by an actuator (so impacts that happen at once keep their
