@@ -43,7 +43,7 @@ import numpy as np
 from conveyor_twin.bench import clog_reference as reference
 from conveyor_twin.bench.clog_scenes import SCENES, Scene, build_scene, quiet_time, run_twin
 from conveyor_twin.cell import load_cell
-from conveyor_twin.cell.model import MicroModel
+from conveyor_twin.cell.model import CONTACT_TOLERANCE_MAX, MicroModel
 
 DEFAULT_GAPS = (1.5, 2, 2.5, 3, 4)  # clear width of the gap [part diameters]
 DEFAULT_SEEDS = 20                  # runs per scene and gap (seeds 1..n)
@@ -310,8 +310,9 @@ def main(argv: List[str]) -> int:
         p.error('--reference and --save-reference exclude each other')
     if args.sweep_budget is not None and args.sweep_budget < 0:
         p.error('--sweep-budget: at least 0 contact visits')
-    if args.sweep_tolerance is not None and not 0.0 <= args.sweep_tolerance <= 0.1:
-        p.error('--sweep-tolerance: 0..0.1 m/s')
+    tolerance = args.sweep_tolerance
+    if tolerance is not None and not 0.0 <= tolerance <= CONTACT_TOLERANCE_MAX:
+        p.error(f'--sweep-tolerance: 0..{CONTACT_TOLERANCE_MAX:g} m/s')
     if args.skip_pymunk and (args.reference or args.save_reference or args.convergence):
         p.error('--skip-pymunk excludes --reference, --save-reference and --convergence')
     pymunk = reference.settings(args.pymunk_iterations, args.pymunk_slop, args.pymunk_step)

@@ -19,10 +19,10 @@ from conveyor_twin.cell.loader_curves import check_rail_names, guide_rails, read
 from conveyor_twin.cell.reader import check_number, check_point, COORDINATE_LIMIT, KeyReader
 from conveyor_twin.cell.model import (
     ACTUATOR_KINDS, Actuator, AutoSwitch, Belt, Cell, CONTACT_MODELS, CONTACT_SWEEP_BUDGET,
-    CONTACT_SWEEPS, CONTACT_SWEEPS_MAX, CONTACT_TOLERANCE, ContactModel, LightBarrier,
-    MACRO_SCHEMES, MACRO_VARIANTS, MacroModel, MacroScheme, MacroVariant, MicroModel, Obstacle,
-    OBSTACLE_KINDS, ObstacleKind, PART_SHAPES, PartType, Point, Rect, Settings, Sink, Source,
-    SOURCE_PATTERNS, Zone, ZONE_POLICIES, ZonePolicy,
+    CONTACT_SWEEPS, CONTACT_SWEEPS_MAX, CONTACT_TOLERANCE, CONTACT_TOLERANCE_MAX, ContactModel,
+    LightBarrier, MACRO_SCHEMES, MACRO_VARIANTS, MacroModel, MacroScheme, MacroVariant, MicroModel,
+    Obstacle, OBSTACLE_KINDS, ObstacleKind, PART_SHAPES, PartType, Point, Rect, Settings, Sink,
+    Source, SOURCE_PATTERNS, Zone, ZONE_POLICIES, ZonePolicy,
 )
 
 __all__ = ['cell_from_mapping', 'COORDINATE_LIMIT', 'default_cell_text', 'KeyReader',
@@ -292,7 +292,8 @@ def _micro(r: KeyReader) -> MicroModel:
                                      high=10_000),
         contact_sweep_budget=r.integer('contact_sweep_budget', CONTACT_SWEEP_BUDGET, low=0,
                                        high=1_000_000_000),
-        contact_tolerance=r.number('contact_tolerance', CONTACT_TOLERANCE, low=0.0, high=0.1),
+        contact_tolerance=r.number('contact_tolerance', CONTACT_TOLERANCE, low=0.0,
+                                    high=CONTACT_TOLERANCE_MAX),
     )
     r.done()
     if model.contact_sweeps_max < model.contact_sweeps:

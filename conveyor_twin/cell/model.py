@@ -409,6 +409,7 @@ CONTACT_SWEEPS = 16
 CONTACT_SWEEPS_MAX = 512
 CONTACT_SWEEP_BUDGET = 200_000
 CONTACT_TOLERANCE = 3e-4
+CONTACT_TOLERANCE_MAX = 0.1      # the largest tolerance a cell may set [m/s]
 
 
 @dataclass(frozen=True)

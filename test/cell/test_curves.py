@@ -442,8 +442,8 @@ def test_the_l_line_example_is_an_l_with_a_railed_curve_sensors_and_one_zone(cap
 
 #: sha256 (16 hex digits) of each shipped straight cell's model without the fields added for
 #: curves and transfer units (``curve``, ``surface_speed``, ``force_limit``) and the contact
-#: sweeps (``contact_sweeps*``, ``contact_tolerance``, at their defaults), as loaded before they existed: straight
-#: cells load exactly as before.
+#: sweeps (``contact_sweeps*``, ``contact_tolerance``, at their defaults), as loaded before they
+#: existed: straight cells load exactly as before.
 STRAIGHT_CELLS = {
     None: '1ef353f40d37dbc8',
     'bench_micro.yaml': '1fc4c13a66784750',

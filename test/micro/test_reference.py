@@ -162,10 +162,10 @@ def test_the_cell_sets_the_sweep_budget_and_arguments_override_it():
     assert (sim.mp[MP_SWEEP_WORK], sim.mp[MP_TOLERANCE]) == (200_000, 3e-4)
     cell = dataclasses.replace(cell, micro=dataclasses.replace(
         cell.micro, contact_sweeps=8, contact_sweeps_max=64, contact_sweep_budget=5000,
-        contact_tolerance=3e-4))
+        contact_tolerance=5e-4))
     sim = MicroSim(cell, seed=0)
     assert (sim.cfg[CF_PASSES], sim.mp[MP_MAX_SWEEPS], sim.mp[MP_SWEEP_WORK],
-            sim.mp[MP_TOLERANCE]) == (8, 64, 5000, 3e-4)
+            sim.mp[MP_TOLERANCE]) == (8, 64, 5000, 5e-4)
     sim = MicroSim(cell, seed=0, passes=3, max_passes=4, sweep_work=0, tolerance=0.0)
     assert (sim.cfg[CF_PASSES], sim.mp[MP_MAX_SWEEPS], sim.mp[MP_SWEEP_WORK],
             sim.mp[MP_TOLERANCE]) == (3, 4, 0, 0.0)
