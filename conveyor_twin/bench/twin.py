@@ -21,7 +21,10 @@ the measuring process runs under SCHED_FIFO (``--reader-priority``, below the tw
 where permitted, so that other work on a loaded machine does not make it fall 100 messages
 behind the twin's reliable streams (their history) or miss best-effort ``/clock`` samples.
 - overruns and step times from the twin's ``diagnostics`` (1 Hz) during the window, and the
-  twin's closing summary.
+  twin's closing summary; where the late steps come from: every second with an overrun,
+  counted by its slowest step: waiting for the CPU (the stepping thread ran for less than
+  half of it), or the part of the step that took most of it (``slowest_step_parts_ms``:
+  commands, each stage, outputs).
 
 The host's floor (``bench host``: a C loop paced exactly like the twin's stepping thread, doing
 no work) runs for ``--floor-window`` seconds before the first twin window and after every twin
@@ -58,6 +61,7 @@ import numpy as np
 
 from conveyor_twin.bench.cpu import cpu_times, steal_percent
 from conveyor_twin.bench.twin_rounds import print_rounds, rounds_summary, STEP_NS, STREAMS
+from conveyor_twin.bench.twin_window import window_figures
 
 DEFAULT_DURATION = 60.0   # s measured
 DEFAULT_PARTS = 1000
@@ -294,22 +298,6 @@ def subscriber_main(argv: List[str]) -> int:
     return 0
 
 
-def _window_figures(diagnostics: List[Dict[str, str]]) -> Dict[str, object]:
-    if len(diagnostics) < 2:
-        return {}
-    first, last = diagnostics[0], diagnostics[-1]
-    return {
-        'overruns_in_window': int(last['overruns']) - int(first['overruns']),
-        'diagnostics_messages': len(diagnostics),
-        'step_time_mean_ms_median': float(np.median(
-            [float(d['step_time_mean_ms']) for d in diagnostics])),
-        'step_time_p99_ms_max': max(float(d['step_time_p99_ms']) for d in diagnostics),
-        'step_time_max_ms_max': max(float(d['step_time_max_ms']) for d in diagnostics),
-        'micro_in_flight': [int(float(diagnostics[0].get('micro_in_flight', 0))),
-                            int(float(last.get('micro_in_flight', 0)))],
-    }
-
-
 def _signal_group(pid: int, sig: int) -> None:
     """Send ``sig`` to the twin's process group, if anything of it is left."""
     try:
@@ -409,7 +397,7 @@ def run_layout(split: bool, args: argparse.Namespace, directory: str,
         figures['error'] = 'the subscriber process gave no result'
         return figures
     figures.update({k: v for k, v in result.items() if k != 'diagnostics'})
-    figures.update(_window_figures(result['diagnostics']))
+    figures.update(window_figures(result['diagnostics']))
     if summary is not None:
         figures['twin_summary'] = {k: summary.get(k) for k in
                                    ('steps', 'overruns', 'real_time_factor', 'step_time_ms',
@@ -495,6 +483,11 @@ def _print(figures: Dict[str, object]) -> None:
           f"(median of 1 s windows) {figures.get('step_time_mean_ms_median')} ms, p99 (worst "
           f"window) {figures.get('step_time_p99_ms_max')} ms, max "
           f"{figures.get('step_time_max_ms_max')} ms")
+    if figures.get('slowest_step_parts_ms'):
+        print(f"  where the late steps come from (seconds with an overrun, by their slowest "
+              f"step): {figures.get('late_seconds_by_cause')}; slowest step "
+              f"{figures.get('slowest_step_ms')} ms ({figures.get('slowest_step_parts_ms')} ms; "
+              f"CPU {figures.get('slowest_step_cpu_ms')} ms)")
     floor = figures.get('floor') or {}
     if floor.get('windows'):
         counts = [w.get('overruns', w.get('error')) for w in floor['windows']]

@@ -39,6 +39,8 @@ class MicroStage:
         published in place of the micro ones (None: every barrier is micro).
     """
 
+    label = 'micro'   # its part of a step's time (:class:`~.timing.StepParts`)
+
     def __init__(self, cell: Cell, seed: int, *,
                  macro_barriers: Optional[BarrierOverlay] = None) -> None:
         self.macro_barriers = macro_barriers
@@ -181,6 +183,8 @@ class MicroStage:
 
 class MacroStage:
     """Macro scale: the density of every zone whose policy is ``macro`` or ``auto``."""
+
+    label = 'macro'
 
     def __init__(self, cell: Cell, seed: int = 0) -> None:
         self.reset(cell, seed)

@@ -2,7 +2,7 @@
 
 from enum import Enum
 import time
-from typing import Dict
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -142,3 +142,62 @@ class StepStats:
     def count(self) -> int:
         """Number of steps recorded."""
         return self._count
+
+
+class StepParts:
+    """Where the slowest recent step went: its wall time in each part of the step and its CPU
+    time [ms].
+
+    The twin hands :meth:`add` every step's wall time per part [ns] (``labels``: its commands
+    and actuation, each stage, its outputs) and the stepping thread's CPU time in it; a late
+    step shows which part made it late, and whether the step worked that long (CPU time near
+    the wall time) or waited for the CPU (the machine ran something else). Kept per block of
+    ``window`` steps: :meth:`slowest` is the slowest step of the current block and the block
+    before, so a reader at any rate sees the slowest of the last one or two windows.
+
+    :param labels: the parts' names, in the order :meth:`add` gets them.
+    :param window: steps per block (1000: one second at 1 kHz, as :class:`StepStats`).
+    """
+
+    def __init__(self, labels: Sequence[str], window: int = 1000) -> None:
+        self.labels = list(labels)
+        self._window = window
+        self._count = 0
+        self._current: Optional[Tuple[List[int], int]] = None
+        self._current_total = -1
+        self._before: Optional[Tuple[List[int], int]] = None
+        self._before_total = -1
+
+    def add(self, laps_ns: List[int], cpu_ns: int) -> None:
+        """Record one step's wall time per part and its CPU time [ns] (the parts are copied if
+        it is the slowest so far)."""
+        total = sum(laps_ns)
+        if total > self._current_total:
+            self._current_total = total
+            self._current = (list(laps_ns), cpu_ns)
+        self._count += 1
+        if self._count >= self._window:
+            self._before, self._before_total = self._current, self._current_total
+            self._current, self._current_total, self._count = None, -1, 0
+
+    def slowest(self) -> Optional[Dict[str, float]]:
+        """Return the slowest recent step's wall time per part, its ``total`` and its ``cpu``
+        time [ms] (None before the first step)."""
+        record = self._current if self._current_total >= self._before_total else self._before
+        if record is None:
+            return None
+        laps, cpu_ns = record
+        parts = {label: ns * 1e-6 for label, ns in zip(self.labels, laps)}
+        parts['total'] = sum(laps) * 1e-6
+        parts['cpu'] = cpu_ns * 1e-6
+        return parts
+
+    def describe(self) -> str:
+        """Return the parts of :meth:`slowest` as one line, the largest first: ``micro 0.712,
+        outputs 0.061, ...`` [ms] ('' before the first step)."""
+        parts = self.slowest()
+        if parts is None:
+            return ''
+        del parts['total'], parts['cpu']
+        return ', '.join(f'{label} {ms:.3f}' for label, ms in
+                         sorted(parts.items(), key=lambda item: -item[1]))

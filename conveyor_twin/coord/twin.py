@@ -13,6 +13,7 @@ Each step ``k`` (the state after it is stamped ``k * dt``):
 """
 
 import threading
+import time
 from typing import Callable, List, Optional, Protocol, Sequence
 
 import numpy as np
@@ -22,13 +23,15 @@ from conveyor_twin.coord.actuation import Actuation
 from conveyor_twin.coord.clock import step_ns
 from conveyor_twin.coord.commands import Command, CommandBook, CommandKind
 from conveyor_twin.coord.step_input import StepInput
+from conveyor_twin.coord.timing import StepParts
 from conveyor_twin.faults.actuation import ActuationFaults
 from conveyor_twin.faults.book import FaultBook
 from conveyor_twin.health import Health
 
 
 class Stage(Protocol):
-    """One scale's core behind a uniform per-step interface."""
+    """One scale's core behind a uniform per-step interface; its ``label`` (optional, else the
+    class name) names it in the step's time per part (:class:`~.timing.StepParts`)."""
 
     def advance(self, inp: StepInput) -> None:
         """Advance one step with the coordinator's inputs."""
@@ -53,6 +56,13 @@ class Twin:
                  actuator_load: Optional[Callable[[], Optional[np.ndarray]]] = None) -> None:
         self.lock = threading.RLock()
         self.stages: List[Stage] = list(stages)
+        #: The slowest recent step's time per part (commands and actuation, each stage, the
+        #: outputs: step listeners and fault watchers) and its CPU time; in the coordinator's
+        #: diagnostics.
+        self.step_parts = StepParts(
+            ['commands'] + [getattr(s, 'label', type(s).__name__) for s in self.stages]
+            + ['outputs'])
+        self._laps = [0] * (len(self.stages) + 2)
         self._actuator_load = actuator_load
         self.step_listeners: List[Callable[[StepInput, List[Command]], None]] = []
         self._last_commands: List[Command] = []
@@ -134,11 +144,18 @@ class Twin:
     def step(self, n: int = 1) -> StepInput:
         """Advance ``n`` steps with the local stages; return the last step's input."""
         inp = None
+        clock, cpu, laps = time.perf_counter_ns, time.thread_time_ns, self._laps
         with self.lock:
             for _ in range(n):
+                cpu_start = cpu()
+                start = clock()
                 inp = self.prepare()
-                for stage in self.stages:
+                lap = clock()
+                laps[0] = lap - start
+                for i, stage in enumerate(self.stages, 1):
                     stage.advance(inp)
+                    start, lap = lap, clock()
+                    laps[i] = lap - start
                 if self._actuator_load is not None:
                     self.actuation.observe(self._actuator_load())
                 self.step_index = inp.step
@@ -146,4 +163,6 @@ class Twin:
                     listener(inp, self._last_commands)
                 for watcher in self.fault_watchers:
                     watcher(inp)
+                laps[-1] = clock() - lap
+                self.step_parts.add(laps, cpu() - cpu_start)
         return inp

@@ -113,6 +113,8 @@ class ScaleCoupling:
         the environment variable ``CONVEYOR_TWIN_CHECK_BALANCE``.
     """
 
+    label = 'hand-over'   # its part of a step's time
+
     def __init__(self, micro_stage, macro_stage, *,
                  barriers: Optional[MacroZoneBarriers] = None,
                  check: Optional[bool] = None) -> None:

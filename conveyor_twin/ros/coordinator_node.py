@@ -128,6 +128,7 @@ class CoordinatorNode(Node):
         """The coordinator's status (a :class:`~conveyor_twin.wire.diagnostics.Status`), the
         faults' and the health's."""
         window = self.runner.stats.window()
+        slowest = self.twin.step_parts.slowest() or {'total': 0.0, 'cpu': 0.0}
         values = {
             'step': str(self.twin.step_index),
             'mode': self.runner.mode.value,
@@ -135,6 +136,10 @@ class CoordinatorNode(Node):
             'step_time_p99_ms': f"{window['p99_ms']:.4f}",
             'step_time_max_ms': f"{window['max_ms']:.4f}",
             'overruns': str(self.runner.overruns),
+            # the slowest step of the last one or two windows: its time per part, its CPU time
+            'slowest_step_ms': f"{slowest['total']:.4f}",
+            'slowest_step_parts_ms': self.twin.step_parts.describe(),
+            'slowest_step_cpu_ms': f"{slowest['cpu']:.4f}",
             'real_time_factor': f'{self.runner.real_time_factor():.4f}',
             'realtime_priority': str(self.runner.priority),
             'rejected_commands': str(self.twin.commands.rejected_total),

@@ -64,6 +64,8 @@ class RemoteStage:
         says whether that process still lives).
     """
 
+    label = 'scale processes'   # its part of a step's time (both processes' steps)
+
     def __init__(self, cell: Cell, transport: Transport, *,
                  pids: Optional[Dict[Role, int]] = None) -> None:
         self.cell = cell

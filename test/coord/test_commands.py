@@ -1,6 +1,7 @@
 """Command validation: invalid commands are rejected with a reason and never queued."""
 
 import math
+import time
 
 import pytest
 
@@ -164,6 +165,55 @@ def test_step_stats_window_and_total() -> None:
     assert total['mean_ms'] == pytest.approx(0.505)
     assert total['max_ms'] == pytest.approx(1.0)
     assert abs(total['p50_ms'] - 0.5) <= 0.011 and abs(total['p99_ms'] - 0.99) <= 0.011
+
+
+def test_step_parts_keep_the_slowest_step_of_the_last_one_or_two_windows() -> None:
+    from conveyor_twin.coord.timing import StepParts
+    parts = StepParts(['commands', 'micro', 'outputs'], window=3)
+    assert parts.slowest() is None and parts.describe() == ''
+    for laps in ([1_000, 200_000, 50_000], [1_000, 900_000, 60_000], [2_000, 100_000, 70_000]):
+        parts.add(laps, cpu_ns=sum(laps) - 1_000)
+    # the block of three rolled over: its slowest step is still reported
+    assert parts.slowest() == pytest.approx({'commands': 0.001, 'micro': 0.9, 'outputs': 0.06,
+                                             'total': 0.961, 'cpu': 0.96})
+    assert parts.describe() == 'micro 0.900, outputs 0.060, commands 0.001'
+    laps = [3_000, 10_000, 400_000]
+    parts.add(laps, cpu_ns=50_000)
+    laps[2] = 0   # the caller reuses its list: the record is a copy
+    assert parts.slowest()['total'] == pytest.approx(0.961)
+    parts.add([1_000, 1_000, 1_000], cpu_ns=3_000)
+    parts.add([1_000, 1_000, 1_000], cpu_ns=3_000)
+    # two blocks later the 0.961 ms step is gone; the slowest of the last block is reported
+    assert parts.describe() == 'outputs 0.400, micro 0.010, commands 0.003'
+    assert parts.slowest()['cpu'] == pytest.approx(0.05)   # it waited for the CPU
+
+
+def test_the_twin_times_each_part_of_its_steps() -> None:
+    from conveyor_twin.coord.twin import Twin
+
+    class Slow:
+        label = 'slow'
+
+        def advance(self, inp) -> None:
+            time.sleep(0.002)
+
+        def reset(self, cell, seed) -> None:
+            pass
+
+    class Unnamed:
+        def advance(self, inp) -> None:
+            pass
+
+        def reset(self, cell, seed) -> None:
+            pass
+
+    twin = Twin(load_cell(), seed=0, stages=[Slow(), Unnamed()])
+    twin.step(3)
+    parts = twin.step_parts.slowest()
+    assert list(parts) == ['commands', 'slow', 'Unnamed', 'outputs', 'total', 'cpu']
+    assert parts['slow'] >= 2.0 and parts['total'] >= parts['slow']
+    assert parts['cpu'] < parts['slow']    # a sleeping stage takes wall time, little CPU
+    assert twin.step_parts.describe().startswith('slow ')
 
 
 def test_deadline_pacer_counts_overruns_without_skipping() -> None:

@@ -36,6 +36,12 @@ def test_bench_twin_measures_every_stream(reader):
         assert stream['out_of_order'] == 0, (topic, stream)
         assert stream['interarrival_p50_ms'] > 0.0, (topic, stream)
     assert figures['twin_summary']['steps'] > 0
+    # the slowest step of the window and its parts; the late seconds counted by part
+    assert figures['slowest_step_ms'] > 0.0
+    assert 'micro ' in figures['slowest_step_parts_ms']
+    assert 0.0 < figures['slowest_step_cpu_ms'] <= figures['slowest_step_ms'] + 0.01
+    assert set(figures['late_seconds_by_cause']) <= {'commands', 'micro', 'macro', 'hand-over',
+                                                     'outputs', 'waited for the CPU'}
     # the paced floor ran before and after the twin's window, 500 deadlines each
     windows = figures['floor']['windows']
     assert [w['steps'] for w in windows] == [500, 500], windows
@@ -49,6 +55,25 @@ def test_bench_twin_measures_every_stream(reader):
     assert set(summary['lost']) == set(STREAMS)  # /clock included
     assert summary['lost_total'] == sum(summary['lost'].values())
     assert summary['lost'] == {t: s['lost'] for t, s in figures['streams'].items()}
+
+
+def test_late_seconds_are_counted_by_the_cause_of_their_slowest_step():
+    from conveyor_twin.bench.twin_window import late_steps_by_cause
+
+    def second(overruns, slowest, cpu, parts):
+        return {'overruns': str(overruns), 'slowest_step_ms': str(slowest),
+                'slowest_step_cpu_ms': str(cpu), 'slowest_step_parts_ms': parts}
+
+    figures = late_steps_by_cause([second(0, 0.2, 0.2, 'micro 0.150, outputs 0.050'),
+                           second(2, 1.3, 1.25, 'micro 1.200, outputs 0.100'),
+                           second(2, 0.9, 0.9, 'outputs 0.600, micro 0.300'),
+                           second(3, 1.1, 1.0, 'outputs 0.700, hand-over 0.400'),
+                           second(5, 1.2, 1.1, 'micro 1.100, outputs 0.100'),
+                           second(9, 7.3, 0.4, 'micro 7.100, outputs 0.200')])
+    assert figures == {'late_seconds_by_cause': {'micro': 2, 'outputs': 1,
+                                                 'waited for the CPU': 1},
+                       'slowest_step_ms': 7.3, 'slowest_step_cpu_ms': 0.4,
+                       'slowest_step_parts_ms': 'micro 7.100, outputs 0.200'}
 
 
 def test_refused_entries_of_both_messages():

@@ -12,7 +12,8 @@ from conveyor_twin.testing import wait_for
 
 pytestmark = pytest.mark.ros
 KEYS = {'step', 'mode', 'step_time_mean_ms', 'step_time_p99_ms', 'step_time_max_ms',
-        'overruns', 'real_time_factor', 'rejected_commands', 'last_rejection', 'publish_failures',
+        'overruns', 'slowest_step_ms', 'slowest_step_parts_ms', 'slowest_step_cpu_ms',
+        'real_time_factor', 'rejected_commands', 'last_rejection', 'publish_failures',
         'micro_entered', 'micro_left', 'micro_in_flight',
         'macro_entered', 'macro_left', 'macro_in_flight'}
 
@@ -42,6 +43,14 @@ def test_diagnostics_every_sim_second_with_step_times_overruns_rtf_rejections_ba
         mean, p99, peak = (float(values[f'step_time_{k}_ms']) for k in ('mean', 'p99', 'max'))
         assert 0.0 < mean <= peak and p99 <= peak
         assert values['overruns'] == '0' and values['rejected_commands'] == '0'
+        # the slowest recent step, and its time per part of the step, largest first
+        parts = {label: float(ms) for label, ms in
+                 (item.rsplit(' ', 1) for item in values['slowest_step_parts_ms'].split(', '))}
+        assert set(parts) == {'commands', 'micro', 'macro', 'hand-over', 'outputs'}
+        assert list(parts.values()) == sorted(parts.values(), reverse=True)
+        assert float(values['slowest_step_ms']) == pytest.approx(sum(parts.values()), abs=0.003)
+        assert 0.0 < float(values['slowest_step_cpu_ms'])
+        assert float(values['slowest_step_ms']) > 0.0
         float(values['real_time_factor'])
         # part balance: what entered is in flight or has left
         entered = float(values['micro_entered']) + float(values['macro_entered'])
