@@ -57,8 +57,8 @@ class Twin:
         self.lock = threading.RLock()
         self.stages: List[Stage] = list(stages)
         #: The slowest recent step's time per part (commands and actuation, each stage, the
-        #: outputs: step listeners and fault watchers) and its CPU time; in the coordinator's
-        #: diagnostics.
+        #: outputs: the actuators' load, step listeners and fault watchers) and its CPU time;
+        #: in the coordinator's diagnostics.
         self.step_parts = StepParts(
             ['commands'] + [getattr(s, 'label', type(s).__name__) for s in self.stages]
             + ['outputs'])
