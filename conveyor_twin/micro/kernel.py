@@ -115,7 +115,7 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
     :param statics: ``(static_start, static_items, shp, shp_verts)``: static shapes per cell.
     :param contacts: ``(va, vb, out, ct, cidx, acc, prev, island, island_sums)``: narrow-phase
         scratch, contact records, activities, the previous substep's contacts (warm start) and
-        the scratch of the energy limit.
+        the scratch of the energy limit (``island_sums`` also holds the impulse sweeps' marks).
     :param sources: ``(src, src_next, src_state, rng)``; ``exits``: ``(sinks, sink_count,
         region, ob_id, ob_type, ob_P)``; ``barriers``: ``(lb, blocked, edge_count, last_part,
         ev_i, ev_f)``.
@@ -218,7 +218,8 @@ def run_steps(nsteps, parts, model, drives, grid, statics, contacts, sources, ex
                     tz[i] = wz[i]
                 _found, bounces = prepare_contacts(nc, ct, cidx, ptype, pt, mp, vx, vy, wz,
                                                    fx, fy, tz, prev)
-                solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev)
+                solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev,
+                               island_sums)
                 if bounces:
                     restitute(nc, ct, cidx, ptype, vx, vy, wz, pt, mp, island, prev)
                 add_actuator_load(nc, ct, cidx, n_static, (vx, vy, wz), mp, h, inv_dt, False,

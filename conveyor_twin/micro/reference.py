@@ -10,6 +10,8 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from conveyor_twin.micro.contacts.impulses import MOVING_SHARE, PARTIAL_SWEEPS
+
 Contact = Tuple[np.ndarray, float]   # (unit normal from B to A, depth [m])
 
 
@@ -136,8 +138,8 @@ def cross(r: np.ndarray, v: np.ndarray) -> float:
 def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np.ndarray,
                i_inv: np.ndarray, passes: int, heat: Optional[np.ndarray] = None, *,
                h: float, tolerance: float, bounce_passes: int,
-               bounce_tolerance: float, work: int = 0,
-               max_passes: int = 0) -> List[Tuple[float, float]]:
+               bounce_tolerance: float, work: int = 0, max_passes: int = 0,
+               stats: Optional[dict] = None) -> List[Tuple[float, float]]:
     """Apply the impulses of :func:`conveyor_twin.micro.contacts.impulses.prepare_contacts`,
     :func:`~conveyor_twin.micro.contacts.impulses.solve_impulses`,
     :func:`~conveyor_twin.micro.contacts.restitution.restitute` and
@@ -154,7 +156,11 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
     :param v: (n, 2) velocities, in place.
     :param heat: (n,) what surface friction dissipated on each part in the substep [J] (the
         external work an island may turn into kinetic energy; zeros if None).
+    :param stats: filled, if given, with the impulse sweeps' ``full_sweeps``, ``sweeps`` (full
+        and partial) and ``partial_visits`` (contacts visited in partial sweeps).
     """
+    stats = {} if stats is None else stats
+    stats['partial_visits'] = 0
     v0, w0 = v.copy(), w.copy()
 
     def body(c, side):
@@ -212,6 +218,33 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
             if residual <= tolerance:
                 break
 
+    def impulse_sweeps(visits, limit_passes, step, tolerance):
+        # full sweeps, each followed, while parts move, by partial sweeps over their contacts
+        full_sweeps, it, moving = 0, 0, None
+        while full_sweeps < limit_passes:
+            order_now = visits if it % 2 == 0 else visits[::-1]
+            if moving is not None:
+                order_now = [k for k in order_now if {contacts[k]['a'], contacts[k]['b']}
+                             & moving]
+                stats['partial_visits'] += len(order_now)
+            residual, moved = 0.0, set()
+            for k in order_now:
+                change = step(k)
+                residual = max(residual, change)
+                if change > MOVING_SHARE * tolerance:
+                    moved |= {contacts[k]['a'], contacts[k]['b']} - {-1}
+            it += 1
+            if moving is None:
+                full_sweeps += 1
+                if residual <= tolerance:
+                    break
+                partial = 0
+            else:
+                partial += 1
+            moving = moved if moved and partial < PARTIAL_SWEEPS else None
+        stats['full_sweeps'] = full_sweeps
+        stats['sweeps'] = it
+
     def solve(k, touching=False):
         c = contacts[k]
         n = np.asarray(c['n'], dtype=float)
@@ -244,7 +277,7 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
     limit = passes
     if work > 0 and contacts:
         limit = max(passes, min(max_passes, work // len(contacts)))
-    sweeps(order, limit, solve, tolerance)
+    impulse_sweeps(order, limit, solve, tolerance)
     kept = [list(a) for a in acc]      # the next substep's warm start: before the bounce
     # impacts (no warm start) of free islands (none of their loaded contacts warm started or on
     # a moving body): Poisson's restitution on their compression swept to convergence as

@@ -64,10 +64,11 @@ def test_near_phase_matches_reference(kinds):
     assert touching > 50
 
 
-@pytest.mark.parametrize('budget', ['fixed', 'work'])
+@pytest.mark.parametrize('budget', ['fixed', 'work', 'partial'])
 def test_impulse_sweeps_match_reference(budget):
     """``fixed``: 3 sweeps or the tolerance; ``work``: a budget of 6 sweeps' visits, no
-    tolerance, so the sweeps the budget buys beyond the 3 count."""
+    tolerance, so the sweeps the budget buys beyond the 3 count; ``partial``: that budget and
+    the tolerance, so partial sweeps visit the contacts of the parts still moving only."""
     cell = make_cell(part_types=(disc(restitution=0.4, mu_s=0.3, mu_k=0.2),
                                  box(length=0.016, width=0.008)),
                      obstacles=(wall('w', (0.2, -0.1), (0.4, -0.1), thickness=0.004),))
@@ -116,22 +117,29 @@ def test_impulse_sweeps_match_reference(budget):
     heat = rng.uniform(-1e-4, 1e-5, size=n)
     mp = sim.mp.copy()
     mp[MP_SWEEP_WORK] = 0.0
-    if budget == 'work':
+    if budget != 'fixed':
         mp[MP_SWEEP_WORK] = 6 * nc + 1
         mp[MP_MAX_SWEEPS] = 256
+    if budget == 'work':
         mp[MP_TOLERANCE] = 0.0
+    stats = {}
     impulses = sweeps_ref(contacts, v, w, sim.pt[types, PT_INV_MASS],
                           sim.pt[types, PT_INV_INERTIA], passes=3, heat=heat, h=mp[MP_DT],
                           tolerance=mp[MP_TOLERANCE], bounce_passes=int(mp[MP_BOUNCE_PASSES]),
                           bounce_tolerance=mp[MP_BOUNCE_TOLERANCE],
-                          work=int(mp[MP_SWEEP_WORK]), max_passes=int(mp[MP_MAX_SWEEPS]))
+                          work=int(mp[MP_SWEEP_WORK]), max_passes=int(mp[MP_MAX_SWEEPS]),
+                          stats=stats)
     v0 = (vx[:n].copy(), vy[:n].copy(), wz[:n].copy())
     found, bounces = prepare_contacts(nc, ct, cidx, s.part_type, sim.pt, mp, vx, vy, wz, *v0,
                                       prev)
     assert found == len(warm)
     sweeps = solve_impulses(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, 3, mp, sim.acc,
-                            prev)
-    assert sweeps == 6 if budget == 'work' else sweeps <= 3
+                            prev, contact_arrays[8])
+    assert sweeps == stats['full_sweeps']
+    assert sweeps == 6 if budget == 'work' else sweeps <= (3 if budget == 'fixed' else 6)
+    if budget == 'partial':     # partial sweeps ran and left out the parts that had settled
+        partial = stats['sweeps'] - stats['full_sweeps']
+        assert 0 < stats['partial_visits'] < partial * nc
     assert bounces > 0
     restitute(nc, ct, cidx, s.part_type, vx, vy, wz, sim.pt, mp, contact_arrays[7], prev)
     scaled = limit_energy(n, nc, s.part_type, sim.pt, (vx, vy, wz), v0, heat,

@@ -15,7 +15,9 @@ Gauss-Seidel) in the arrangement of Box2D v3's solver, per substep:
    exactly within the substep), the accumulated tangential impulse clamped to the Coulomb cone
    ``mu(|u_t|)`` times the normal one (Horváth et al.'s speed-dependent coefficient); until no
    increment changes a relative speed by more than the cell's tolerance, at most as many
-   sweeps as its budget of contact visits buys (:func:`sweep_limit`);
+   sweeps as its budget of contact visits buys (:func:`sweep_limit`); between two sweeps over
+   every contact, up to :data:`PARTIAL_SWEEPS` sweeps over the contacts of the parts still
+   moving (the rest of a jam waits for the few contacts that converge slowly);
 3. :func:`~.restitution.restitute`: restitution in a pass of its own: Poisson's, on their
    compression swept to convergence, for the new impacts of islands neither held from the
    substep before nor driven by an actuator (so impacts that happen at once keep their
@@ -55,6 +57,10 @@ from conveyor_twin.micro.contacts.tables import (A_CONTACT_FRICTION, CT_BOUNCE, 
                                                  MP_MAX_SWEEPS, MP_SWEEP_WORK, MP_TOLERANCE,
                                                  MP_TRACK, PV_KA, PV_KB, PV_LN, PV_LT)
 from conveyor_twin.micro.state import PT_INV_INERTIA, PT_INV_MASS
+
+PARTIAL_SWEEPS = 8      # the most partial sweeps between two full ones
+MOVING_SHARE = 0.5      # a part moves in a sweep while one of its increments exceeds this share
+                        # of the tolerance
 
 
 @njit(cache=True, inline='always')
@@ -262,12 +268,21 @@ def sweep_limit(nc, passes, mp):
 
 
 @njit(cache=True)
-def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
+def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev, marks):
     """Apply the contacts' impulses in sweeps after the warm start of :func:`prepare_contacts`
     until no contact's increment changes a relative speed by more than ``mp[MP_TOLERANCE]``
     [m/s], at most as many sweeps as :func:`sweep_limit` allows (``passes`` at least); keep
     the keys and accumulated impulses in ``prev`` for the next substep. Return the number of
-    sweeps.
+    full sweeps.
+
+    Full and partial sweeps: after a full sweep (every contact) that has not converged, up to
+    :data:`PARTIAL_SWEEPS` partial sweeps visit only the contacts of the parts that moved in
+    the sweep before (an increment above :data:`MOVING_SHARE` of the tolerance on one of their
+    contacts), until none moved; then a full sweep again. Only a full sweep stops the solve,
+    and only full sweeps count against the limit. In a jam a few contacts around one part
+    converge slowly while hundreds have converged; the partial sweeps spend the work on those
+    few. ``marks`` (scratch, two rows or more of one column per part, overwritten): per part,
+    the last even and the last odd sweep it moved in.
 
     Sequential impulses with accumulated impulses (Catto; Erleben's projected Gauss-Seidel):
     every impulse acts on both bodies of its contact, equal and opposite, at the contact point
@@ -291,9 +306,25 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
     tol = mp[MP_TOLERANCE]
     pairs, half, visits = sweep_plan(nc, cidx)
     sweeps = sweep_limit(nc, passes, mp)
-    done = 0
-    for it in range(sweeps):
+    for c in range(nc):
+        for side in range(2):
+            i = cidx[c, side]
+            if i >= 0:
+                marks[0, i] = -1.0
+                marks[1, i] = -1.0
+    moving = MOVING_SHARE * tol
+    done = 0          # full sweeps
+    it = -1           # sweeps, full and partial
+    full = True
+    partial = 0       # partial sweeps since the last full one
+    while done < sweeps:
+        it += 1
         residual = 0.0
+        moved = False
+        before = float(it - 1)
+        mark = float(it)
+        last = marks[(it + 1) % 2]
+        now = marks[it % 2]
         for kk in range(visits):
             k = kk if it % 2 == 0 else visits - 1 - kk
             c = sweep_contact(k, pairs, half)
@@ -301,6 +332,8 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
                 continue
             a = cidx[c, 0]
             b = cidx[c, 1]
+            if not full and last[a] != before and (b < 0 or last[b] != before):
+                continue
             ta = ptype[a]
             ima = pt[ta, PT_INV_MASS]
             iia = pt[ta, PT_INV_INERTIA]
@@ -345,7 +378,13 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
             jt = lt1 - lt
             ct[c, CT_LN] = ln1
             ct[c, CT_LT] = lt1
-            residual = max(residual, (abs(jn) + abs(jt)) * ct[c, CT_KN])
+            change = (abs(jn) + abs(jt)) * ct[c, CT_KN]
+            if change > moving:
+                moved = True
+                now[a] = mark
+                if b >= 0:
+                    now[b] = mark
+            residual = max(residual, change)
             # total impulse along x, y (t = (-ny, nx)) and its moments
             px = jn * nx - jt * ny
             py = jn * ny + jt * nx
@@ -358,9 +397,14 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev):
                 wz[b] = wb - iib * (rbx * py - rby * px)
             if track:
                 acc[A_CONTACT_FRICTION] += abs(jt * ut)
-        done = it + 1
-        if residual <= tol:
-            break
+        if full:
+            done += 1
+            if residual <= tol:
+                break
+            partial = 0
+        else:
+            partial += 1
+        full = not moved or partial >= PARTIAL_SWEEPS
     for c in range(nc):
         prev[c, PV_KA] = ct[c, CT_KA]
         prev[c, PV_KB] = ct[c, CT_KB]
