@@ -157,7 +157,7 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
     :param heat: (n,) what surface friction dissipated on each part in the substep [J] (the
         external work an island may turn into kinetic energy; zeros if None).
     :param stats: filled, if given, with the impulse sweeps' ``full_sweeps``, ``sweeps`` (full
-        and partial) and ``partial_visits`` (contacts visited in partial sweeps).
+        and partial), ``visits`` (contacts visited) and ``partial_visits`` (in partial sweeps).
     """
     stats = {} if stats is None else stats
     stats['partial_visits'] = 0
@@ -219,15 +219,17 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
                 break
 
     def impulse_sweeps(visits, limit_passes, step, tolerance):
-        # full sweeps, each followed, while parts move, by partial sweeps over their contacts
-        full_sweeps, it, moving = 0, 0, None
-        while full_sweeps < limit_passes:
+        # full sweeps, each followed, while parts move, by partial sweeps over their contacts;
+        # every visit counts against the budget of limit_passes full sweeps
+        full_sweeps, it, moving, used = 0, 0, None, 0
+        while True:
             order_now = visits if it % 2 == 0 else visits[::-1]
             if moving is not None:
                 order_now = [k for k in order_now if {contacts[k]['a'], contacts[k]['b']}
                              & moving]
                 stats['partial_visits'] += len(order_now)
             residual, moved = 0.0, set()
+            used += len(order_now)
             for k in order_now:
                 change = step(k)
                 residual = max(residual, change)
@@ -241,9 +243,12 @@ def sweeps_ref(contacts: Sequence[dict], v: np.ndarray, w: np.ndarray, m_inv: np
                 partial = 0
             else:
                 partial += 1
+            if used >= limit_passes * len(visits):
+                break
             moving = moved if moved and partial < PARTIAL_SWEEPS else None
         stats['full_sweeps'] = full_sweeps
         stats['sweeps'] = it
+        stats['visits'] = used
 
     def solve(k, touching=False):
         c = contacts[k]

@@ -15,7 +15,7 @@ Gauss-Seidel) in the arrangement of Box2D v3's solver, per substep:
    exactly within the substep), the accumulated tangential impulse clamped to the Coulomb cone
    ``mu(|u_t|)`` times the normal one (Horváth et al.'s speed-dependent coefficient); until no
    increment changes a relative speed by more than the cell's tolerance, at most as many
-   sweeps as its budget of contact visits buys (:func:`sweep_limit`); between two sweeps over
+   sweeps' contact visits as its budget buys (:func:`sweep_limit`); between two sweeps over
    every contact, up to :data:`PARTIAL_SWEEPS` sweeps over the contacts of the parts still
    moving (the rest of a jam waits for the few contacts that converge slowly);
 3. :func:`~.restitution.restitute`: restitution in a pass of its own: Poisson's, on their
@@ -271,17 +271,18 @@ def sweep_limit(nc, passes, mp):
 def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev, marks):
     """Apply the contacts' impulses in sweeps after the warm start of :func:`prepare_contacts`
     until no contact's increment changes a relative speed by more than ``mp[MP_TOLERANCE]``
-    [m/s], at most as many sweeps as :func:`sweep_limit` allows (``passes`` at least); keep
-    the keys and accumulated impulses in ``prev`` for the next substep. Return the number of
-    full sweeps.
+    [m/s], at most as many contact visits as the full sweeps :func:`sweep_limit` allows
+    (``passes`` at least) make; keep the keys and accumulated impulses in ``prev`` for the next
+    substep. Return the number of full sweeps.
 
     Full and partial sweeps: after a full sweep (every contact) that has not converged, up to
     :data:`PARTIAL_SWEEPS` partial sweeps visit only the contacts of the parts that moved in
     the sweep before (an increment above :data:`MOVING_SHARE` of the tolerance on one of their
-    contacts), until none moved; then a full sweep again. Only a full sweep stops the solve,
-    and only full sweeps count against the limit. In a jam a few contacts around one part
-    converge slowly while hundreds have converged; the partial sweeps spend the work on those
-    few. ``marks`` (scratch, two rows or more of one column per part, overwritten): per part,
+    contacts), until none moved; then a full sweep again. Only a full sweep ends the solve as
+    converged; every visit, in partial sweeps too, counts against the budget, so a jam that
+    does not converge costs what its full sweeps alone would. In a jam a few contacts around
+    one part converge slowly while hundreds have converged; the partial sweeps spend the work
+    on those few. ``marks`` (scratch, two rows or more of one column per part, overwritten): per part,
     the last even and the last odd sweep it moved in.
 
     Sequential impulses with accumulated impulses (Catto; Erleben's projected Gauss-Seidel):
@@ -313,11 +314,13 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev, m
                 marks[0, i] = -1.0
                 marks[1, i] = -1.0
     moving = MOVING_SHARE * tol
+    budget = sweeps * nc   # contact visits
+    used = 0
     done = 0          # full sweeps
     it = -1           # sweeps, full and partial
     full = True
     partial = 0       # partial sweeps since the last full one
-    while done < sweeps:
+    while True:
         it += 1
         residual = 0.0
         moved = False
@@ -334,6 +337,7 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev, m
             b = cidx[c, 1]
             if not full and last[a] != before and (b < 0 or last[b] != before):
                 continue
+            used += 1
             ta = ptype[a]
             ima = pt[ta, PT_INV_MASS]
             iia = pt[ta, PT_INV_INERTIA]
@@ -404,6 +408,8 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev, m
             partial = 0
         else:
             partial += 1
+        if used >= budget:
+            break
         full = not moved or partial >= PARTIAL_SWEEPS
     for c in range(nc):
         prev[c, PV_KA] = ct[c, CT_KA]
