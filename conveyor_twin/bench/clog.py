@@ -22,10 +22,10 @@ keeps its per-run results, ``--reference FILE`` uses them instead of running it 
 
 Measured (150 parts, 5 s, 20 seeds and 60 in the four cases at 2-3 d whose clog probability is
 neither 0 nor 1, against a reference at 0.25 ms whose clogging agrees with 0.125 ms): the twin
-agrees in 9 of 10 cases; the clog probability falls from 20 of 20 runs at 1.5 d to none at 4 d
-in both engines and both scenes. The deflector at 2.5 d differs: 47 of 60 clogged against 55
-[0.82, 0.96], over 180 seeds 151 against 165 [0.87, 0.95] (docs/validation.md). A reference
-run costs about twenty twin runs.
+agrees in all 10 cases; the clog probability falls from 20 of 20 runs at 1.5 d to none at 4 d
+in both engines and both scenes (closest: deflector 2.5 d, 50 of 60 clogged against 55 [0.82,
+0.96], passed 38 % against 35 %). Over 180 seeds that case does not agree: 147 clogged against
+165 [0.87, 0.95] (docs/validation.md). A reference run costs about twenty twin runs.
 """
 
 import argparse

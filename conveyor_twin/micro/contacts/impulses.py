@@ -282,8 +282,8 @@ def solve_impulses(nc, ct, cidx, ptype, vx, vy, wz, pt, passes, mp, acc, prev, m
     converged; every visit, in partial sweeps too, counts against the budget, so a jam that
     does not converge costs what its full sweeps alone would. In a jam a few contacts around
     one part converge slowly while hundreds have converged; the partial sweeps spend the work
-    on those few. ``marks`` (scratch, two rows or more of one column per part, overwritten): per part,
-    the last even and the last odd sweep it moved in.
+    on those few. ``marks`` (scratch, two rows or more of one column per part, overwritten):
+    per part, the last even and the last odd sweep it moved in.
 
     Sequential impulses with accumulated impulses (Catto; Erleben's projected Gauss-Seidel):
     every impulse acts on both bodies of its contact, equal and opposite, at the contact point
