@@ -22,9 +22,10 @@ where permitted, so that other work on a loaded machine does not make it fall 10
 behind the twin's reliable streams (their history) or miss best-effort ``/clock`` samples.
 - overruns and step times from the twin's ``diagnostics`` (1 Hz) during the window, and the
   twin's closing summary; where the late steps come from: every second with an overrun,
-  counted by its slowest step: waiting for the CPU (the stepping thread ran for less than
-  half of it), or the part of the step that took most of it (``slowest_step_parts_ms``:
-  commands, each stage, outputs).
+  counted by its slowest step: started late (even that step fit in 1 ms: a late step began
+  after its deadline, the thread resumed late, ``latest_wake_ms``), waiting for the CPU (the
+  stepping thread ran for less than half of it), or the part of the step that took most of it
+  (``slowest_step_parts_ms``: commands, each stage, outputs).
 
 The host's floor (``bench host``: a C loop paced exactly like the twin's stepping thread, doing
 no work) runs for ``--floor-window`` seconds before the first twin window and after every twin
@@ -487,7 +488,8 @@ def _print(figures: Dict[str, object]) -> None:
         print(f"  where the late steps come from (seconds with an overrun, by their slowest "
               f"step): {figures.get('late_seconds_by_cause')}; slowest step "
               f"{figures.get('slowest_step_ms')} ms ({figures.get('slowest_step_parts_ms')} ms; "
-              f"CPU {figures.get('slowest_step_cpu_ms')} ms)")
+              f"CPU {figures.get('slowest_step_cpu_ms')} ms); latest wake-up "
+              f"{figures.get('latest_wake_ms')} ms after its deadline")
     floor = figures.get('floor') or {}
     if floor.get('windows'):
         counts = [w.get('overruns', w.get('error')) for w in floor['windows']]

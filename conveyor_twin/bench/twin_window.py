@@ -10,9 +10,11 @@ import numpy as np
 WORKED_SHARE = 0.5
 
 
-def window_figures(diagnostics: List[Dict[str, str]]) -> Dict[str, object]:
+def window_figures(diagnostics: List[Dict[str, str]], period_ms: float = 1.0
+                   ) -> Dict[str, object]:
     """Return the window's figures from the twin's diagnostics (one per second): overruns,
-    step times, parts in flight and :func:`late_steps_by_cause` ({} with fewer than two)."""
+    step times, parts in flight and :func:`late_steps_by_cause` ({} with fewer than two;
+    ``period_ms``: the twin's step period [ms])."""
     if len(diagnostics) < 2:
         return {}
     first, last = diagnostics[0], diagnostics[-1]
@@ -25,23 +27,28 @@ def window_figures(diagnostics: List[Dict[str, str]]) -> Dict[str, object]:
         'step_time_max_ms_max': max(float(d['step_time_max_ms']) for d in diagnostics),
         'micro_in_flight': [int(float(diagnostics[0].get('micro_in_flight', 0))),
                             int(float(last.get('micro_in_flight', 0)))],
-        **late_steps_by_cause(diagnostics),
+        **late_steps_by_cause(diagnostics, period_ms),
     }
 
 
-def late_steps_by_cause(diagnostics: List[Dict[str, str]]) -> Dict[str, object]:
+def late_steps_by_cause(diagnostics: List[Dict[str, str]], period_ms: float = 1.0
+                        ) -> Dict[str, object]:
     """Where the late steps come from: each second of the window with an overrun, counted by
-    its slowest step: ``waited for the CPU`` if the stepping thread ran less than
-    :data:`WORKED_SHARE` of that step's time (the machine ran something else), else the part
-    of the step (``slowest_step_parts_ms``: commands, each stage, outputs) that took most of it;
-    and the slowest step of the window with its parts and CPU time."""
+    its slowest step: ``started late`` if even that step fit in ``period_ms`` (so a late one
+    began after its deadline: the thread resumed late, ``latest_wake_ms``), ``waited for the
+    CPU`` if the stepping thread ran less than :data:`WORKED_SHARE` of that step's time (the
+    machine ran something else), else the part of the step (``slowest_step_parts_ms``:
+    commands, each stage, outputs) that took most of it; and the slowest step of the window
+    with its parts and CPU time, and the latest wake-up [ms]."""
     late: Dict[str, int] = {}
     slowest = max(diagnostics, key=lambda d: float(d.get('slowest_step_ms', 0.0)))
     for before, now in zip(diagnostics, diagnostics[1:]):
         parts = now.get('slowest_step_parts_ms', '')
         if int(now['overruns']) <= int(before['overruns']) or not parts:
             continue
-        if float(now['slowest_step_cpu_ms']) < WORKED_SHARE * float(now['slowest_step_ms']):
+        if float(now['slowest_step_ms']) < period_ms:
+            cause = 'started late'
+        elif float(now['slowest_step_cpu_ms']) < WORKED_SHARE * float(now['slowest_step_ms']):
             cause = 'waited for the CPU'
         else:
             cause = parts.split(', ')[0].rsplit(' ', 1)[0]
@@ -49,4 +56,5 @@ def late_steps_by_cause(diagnostics: List[Dict[str, str]]) -> Dict[str, object]:
     return {'late_seconds_by_cause': late,
             'slowest_step_ms': float(slowest.get('slowest_step_ms', 0.0)),
             'slowest_step_cpu_ms': float(slowest.get('slowest_step_cpu_ms', 0.0)),
-            'slowest_step_parts_ms': slowest.get('slowest_step_parts_ms', '')}
+            'slowest_step_parts_ms': slowest.get('slowest_step_parts_ms', ''),
+            'latest_wake_ms': max(float(d.get('latest_wake_ms', 0.0)) for d in diagnostics)}

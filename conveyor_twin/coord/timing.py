@@ -35,6 +35,11 @@ class DeadlinePacer:
     :class:`~conveyor_twin.coord.latency.WakeLatencyRequest`) while it paces, until
     :meth:`close`.
 
+    After each sleep the pacer notes how long after the deadline the thread resumed (its wake
+    lateness: the system's wake-up, or another thread holding the interpreter lock); a step
+    that fits its period can still end late when it starts late. :meth:`take_latest_wake`
+    returns the latest since the last call (the diagnostics' window).
+
     :param period_ns: step period [ns].
     """
 
@@ -44,6 +49,7 @@ class DeadlinePacer:
         self.index = 0
         self.overruns = 0
         self.max_lateness_ns = 0
+        self.latest_wake_ns = 0  # latest wake lateness since take_latest_wake [ns]
         self.latency_request = WakeLatencyRequest()
 
     def restart(self) -> None:
@@ -67,6 +73,14 @@ class DeadlinePacer:
         if deadline - now > APPROACH_NS + 50_000:
             time.sleep((deadline - now - APPROACH_NS) * 1e-9)
         sleep_holding_gil(deadline)
+        late = time.monotonic_ns() - deadline
+        if late > self.latest_wake_ns:
+            self.latest_wake_ns = late
+
+    def take_latest_wake(self) -> float:
+        """Return the latest wake lateness since the last call [ms], and start anew."""
+        late, self.latest_wake_ns = self.latest_wake_ns, 0
+        return late * 1e-6
 
 
 _HIST_BIN_S = 1e-6   # whole-run histogram: 1 us bins up to 100 ms (longer steps: last bin)

@@ -140,6 +140,9 @@ class CoordinatorNode(Node):
             'slowest_step_ms': f"{slowest['total']:.4f}",
             'slowest_step_parts_ms': self.twin.step_parts.describe(),
             'slowest_step_cpu_ms': f"{slowest['cpu']:.4f}",
+            # realtime: how long after its deadline the stepping thread resumed at the latest
+            # since the last diagnostics (a step that starts late can end late)
+            'latest_wake_ms': f'{self.runner.pacer.take_latest_wake():.4f}',
             'real_time_factor': f'{self.runner.real_time_factor():.4f}',
             'realtime_priority': str(self.runner.priority),
             'rejected_commands': str(self.twin.commands.rejected_total),

@@ -4,7 +4,8 @@
 and, for every frame, publishes the bytes the frame holds for those streams
 (:data:`conveyor_twin.contract.FRAME` says where) with
 :class:`~conveyor_twin.ros.qos.RawPublisher` (no message objects, refusals counted). A stream
-the frame does not carry in this process is skipped.
+the frame does not carry in this process is skipped. Its node answers a lockstep reader's
+hello once its writers reach that reader (:mod:`conveyor_twin.ros.reader_handshake`).
 """
 
 from operator import attrgetter
@@ -15,6 +16,7 @@ from conveyor_twin.contract import Shape
 from conveyor_twin.output.frame import Frame
 from conveyor_twin.ros.endpoints import create_publisher
 from conveyor_twin.ros.qos import RawPublisher
+from conveyor_twin.ros.reader_handshake import HandshakeResponder
 
 
 class StreamPublisher:
@@ -34,6 +36,8 @@ class StreamPublisher:
             self.publishers[topic] = create_publisher(node, topic)
             raw[topic] = RawPublisher(self.publishers[topic], logger)
         self.raw_publishers = tuple(raw.values())
+        #: Answers readers that wait until the node's writers reach them.
+        self.handshake = HandshakeResponder(node)
         slots = [(attrgetter(s.attribute), raw[s.topic], s.shape) for s in contract.FRAME
                  if s.topic in raw]
         self._one = tuple((get, send) for get, send, shape in slots if shape is Shape.ONE)

@@ -17,6 +17,7 @@ from rclpy.serialization import deserialize_message
 
 from conveyor_twin import contract
 from conveyor_twin.ros.qos import COMMAND_QOS
+from conveyor_twin.ros.reader_handshake import HandshakeReader
 from conveyor_twin.testing.errors import TwinTimeoutError
 from conveyor_twin.testing.outages import EdgeAccount
 from conveyor_twin.testing.probe import Probe, STREAMS
@@ -32,6 +33,10 @@ HASHED = tuple(t.name for t in (contract.PARTS, contract.DENSITY, contract.LIGHT
                                 contract.LIGHT_BARRIER_EDGES, contract.BELT_STATES,
                                 contract.ACTUATOR_STATES))
 LISTENED = tuple(STREAMS) + tuple(t.name for t in contract.REPLIES + contract.COMMANDS)
+#: What the twin writes to a driver reliably: its writers must reach the driver's readers
+#: before the first step (best-effort ``/clock`` may lose messages anyway).
+REACHED = tuple(t for t in tuple(STREAMS) + tuple(t.name for t in contract.REPLIES)
+                if t != contract.CLOCK.name)
 
 
 class CommandResult(NamedTuple):
@@ -101,14 +106,18 @@ class Driver:
         self._fault_state: tuple = (None, None)  # (latest faults message, decoded)
         self.inject_client = self.probe.create_client(InjectFault, contract.INJECT_FAULT.name)
         self.clear_client = self.probe.create_client(ClearFault, contract.CLEAR_FAULT.name)
+        self.handshake = HandshakeReader(self.probe, [s.topic_name for s in self.probe._subs
+                                                      if s.topic_name.lstrip('/') in REACHED])
         self.belt_pub = self.probe.create_publisher(BeltCommand, contract.BELT_COMMAND.name,
                                                    COMMAND_QOS)
         self.actuator_pub = self.probe.create_publisher(
             ActuatorCommand, contract.ACTUATOR_COMMAND.name, COMMAND_QOS)
 
     def wait_connected(self, timeout: Optional[float] = None) -> bool:
-        """Wait until every stream, service and command topic of the twin is matched (or
-        :attr:`watch` raises: a process of the twin died)."""
+        """Wait until every stream, service and command topic of the twin is matched both
+        ways, the twin's writers having answered the handshake
+        (:mod:`conveyor_twin.ros.reader_handshake`), or :attr:`watch` raises: a process of the
+        twin died."""
         return wait_for(lambda: self.watch() is None and self.probe.matched()
                         and self.step_client.service_is_ready()
                         and self.spawn_client.service_is_ready()
@@ -117,7 +126,8 @@ class Driver:
                         and self.belt_pub.get_subscription_count() > 0
                         and self.actuator_pub.get_subscription_count() > 0
                         and all(s.get_publisher_count() > 0 for s in self.probe._subs
-                                if s.topic_name != contract.CLOCK.name),
+                                if s.topic_name != contract.CLOCK.name)
+                        and self.handshake.reached(),
                         self.timeout if timeout is None else timeout, self.executor)
 
     def wait(self, condition: Callable[[], bool], what: Union[str, Callable[[], str]],

@@ -228,3 +228,23 @@ def test_deadline_pacer_counts_overruns_without_skipping() -> None:
     assert pacer.overruns == 3
     pacer.wait_next()  # deadline 4 lies ahead: sleeps until it
     assert time.monotonic_ns() >= pacer.start_ns + 4_000_000
+
+
+def test_deadline_pacer_reports_its_latest_wake_up_after_a_deadline(monkeypatch) -> None:
+    import time
+    from conveyor_twin.coord import timing
+    pacer = timing.DeadlinePacer(1_000_000)
+    pacer.wait_next()
+    assert 0.0 <= pacer.take_latest_wake() < 1.0
+    time.sleep(0.003)
+    pacer.wait_next()  # an overrun does not sleep: no wake-up to report
+    assert pacer.overruns == 1 and pacer.take_latest_wake() == 0.0
+
+    def oversleep(deadline_ns: int) -> None:  # another thread held the lock at the deadline
+        while time.monotonic_ns() < deadline_ns + 2_000_000:
+            pass
+    monkeypatch.setattr(timing, 'sleep_holding_gil', oversleep)
+    pacer.restart()
+    pacer.wait_next()
+    assert pacer.take_latest_wake() >= 2.0
+    assert pacer.take_latest_wake() == 0.0  # taken: the next window starts anew

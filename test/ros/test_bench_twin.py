@@ -41,7 +41,9 @@ def test_bench_twin_measures_every_stream(reader):
     assert 'micro ' in figures['slowest_step_parts_ms']
     assert 0.0 < figures['slowest_step_cpu_ms'] <= figures['slowest_step_ms'] + 0.01
     assert set(figures['late_seconds_by_cause']) <= {'commands', 'micro', 'macro', 'hand-over',
-                                                     'outputs', 'waited for the CPU'}
+                                                     'outputs', 'waited for the CPU',
+                                                     'started late'}
+    assert figures['latest_wake_ms'] >= 0.0
     # the paced floor ran before and after the twin's window, 500 deadlines each
     windows = figures['floor']['windows']
     assert [w['steps'] for w in windows] == [500, 500], windows
@@ -60,20 +62,27 @@ def test_bench_twin_measures_every_stream(reader):
 def test_late_seconds_are_counted_by_the_cause_of_their_slowest_step():
     from conveyor_twin.bench.twin_window import late_steps_by_cause
 
-    def second(overruns, slowest, cpu, parts):
+    def second(overruns, slowest, cpu, parts, wake=0.01):
         return {'overruns': str(overruns), 'slowest_step_ms': str(slowest),
-                'slowest_step_cpu_ms': str(cpu), 'slowest_step_parts_ms': parts}
+                'slowest_step_cpu_ms': str(cpu), 'slowest_step_parts_ms': parts,
+                'latest_wake_ms': str(wake)}
 
     figures = late_steps_by_cause([second(0, 0.2, 0.2, 'micro 0.150, outputs 0.050'),
                            second(2, 1.3, 1.25, 'micro 1.200, outputs 0.100'),
                            second(2, 0.9, 0.9, 'outputs 0.600, micro 0.300'),
                            second(3, 1.1, 1.0, 'outputs 0.700, hand-over 0.400'),
+                           second(4, 0.7, 0.7, 'micro 0.500, outputs 0.200', wake=0.6),
                            second(5, 1.2, 1.1, 'micro 1.100, outputs 0.100'),
                            second(9, 7.3, 0.4, 'micro 7.100, outputs 0.200')])
-    assert figures == {'late_seconds_by_cause': {'micro': 2, 'outputs': 1,
+    assert figures == {'late_seconds_by_cause': {'micro': 2, 'outputs': 1, 'started late': 1,
                                                  'waited for the CPU': 1},
                        'slowest_step_ms': 7.3, 'slowest_step_cpu_ms': 0.4,
-                       'slowest_step_parts_ms': 'micro 7.100, outputs 0.200'}
+                       'slowest_step_parts_ms': 'micro 7.100, outputs 0.200',
+                       'latest_wake_ms': 0.6}
+    # a step that fits in a longer period cannot overrun on its own either
+    assert late_steps_by_cause([second(0, 0.2, 0.2, 'micro 0.2'),
+                                second(1, 1.3, 1.25, 'micro 1.300')], period_ms=2.0
+                               )['late_seconds_by_cause'] == {'started late': 1}
 
 
 def test_refused_entries_of_both_messages():

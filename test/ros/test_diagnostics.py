@@ -13,6 +13,7 @@ from conveyor_twin.testing import wait_for
 pytestmark = pytest.mark.ros
 KEYS = {'step', 'mode', 'step_time_mean_ms', 'step_time_p99_ms', 'step_time_max_ms',
         'overruns', 'slowest_step_ms', 'slowest_step_parts_ms', 'slowest_step_cpu_ms',
+        'latest_wake_ms',
         'real_time_factor', 'rejected_commands', 'last_rejection', 'publish_failures',
         'micro_entered', 'micro_left', 'micro_in_flight',
         'macro_entered', 'macro_left', 'macro_in_flight'}
@@ -51,6 +52,7 @@ def test_diagnostics_every_sim_second_with_step_times_overruns_rtf_rejections_ba
         assert float(values['slowest_step_ms']) == pytest.approx(sum(parts.values()), abs=0.003)
         assert 0.0 < float(values['slowest_step_cpu_ms'])
         assert float(values['slowest_step_ms']) > 0.0
+        assert values['latest_wake_ms'] == '0.0000'  # lockstep: no step waits for a deadline
         float(values['real_time_factor'])
         # part balance: what entered is in flight or has left
         entered = float(values['micro_entered']) + float(values['macro_entered'])

@@ -12,6 +12,7 @@ import pytest
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from simulation_interfaces.action import SimulateSteps
@@ -58,6 +59,12 @@ class SimClient:
         self.clients = {name: self.node.create_client(kind, name)
                         for name, kind in self.SERVICES.items()}
         self.action = ActionClient(self.node, SimulateSteps, 'simulate_steps')
+        # The feedback as the action's topic carries it: rclpy drops a goal's feedback
+        # callback once its result is in, and the last feedback may arrive after the result.
+        self.feedback: List[Any] = []
+        self.node.create_subscription(SimulateSteps.Impl.FeedbackMessage,
+                                      'simulate_steps/_action/feedback', self.feedback.append,
+                                      QoSProfile(depth=1000))
         for name, client in self.clients.items():
             assert client.wait_for_service(timeout_sec=WAIT), f'{name} not served'
         assert self.action.wait_for_server(timeout_sec=WAIT)
@@ -129,16 +136,17 @@ def spawn_request(part_type: str, x: float, y: float, yaw: float, **extra: Any) 
 
 def simulate(client: SimClient, steps: int) -> List[int]:
     """Run ``simulate_steps``; return the completed steps of every feedback."""
-    feedback: List[int] = []
-    goal = client.complete(client.action.send_goal_async(
-        SimulateSteps.Goal(steps=steps),
-        feedback_callback=lambda msg: feedback.append(msg.feedback.completed_steps)))
+    goal = client.complete(client.action.send_goal_async(SimulateSteps.Goal(steps=steps)))
     assert goal.accepted
     result = client.complete(goal.get_result_async()).result
     assert result.result.result == OK, result.result.error_message
+
+    def feedback() -> List[int]:
+        return [m.feedback.completed_steps for m in client.feedback
+                if bytes(m.goal_id.uuid) == bytes(goal.goal_id.uuid)]
     # feedback travels on a topic of its own: the last may arrive after the result
-    assert wait_for(lambda: feedback and feedback[-1] == steps, WAIT, client.executor)
-    return feedback
+    assert wait_for(lambda: feedback() and feedback()[-1] == steps, WAIT, client.executor)
+    return feedback()
 
 
 def test_driven_only_through_the_interfaces_it_reaches_the_states_of_its_own_services(
