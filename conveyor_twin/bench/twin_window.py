@@ -10,11 +10,9 @@ import numpy as np
 WORKED_SHARE = 0.5
 
 
-def window_figures(diagnostics: List[Dict[str, str]], period_ms: float = 1.0
-                   ) -> Dict[str, object]:
+def window_figures(diagnostics: List[Dict[str, str]]) -> Dict[str, object]:
     """Return the window's figures from the twin's diagnostics (one per second): overruns,
-    step times, parts in flight and :func:`late_steps_by_cause` ({} with fewer than two;
-    ``period_ms``: the twin's step period [ms])."""
+    step times, parts in flight and :func:`late_steps_by_cause` ({} with fewer than two)."""
     if len(diagnostics) < 2:
         return {}
     first, last = diagnostics[0], diagnostics[-1]
@@ -27,7 +25,7 @@ def window_figures(diagnostics: List[Dict[str, str]], period_ms: float = 1.0
         'step_time_max_ms_max': max(float(d['step_time_max_ms']) for d in diagnostics),
         'micro_in_flight': [int(float(diagnostics[0].get('micro_in_flight', 0))),
                             int(float(last.get('micro_in_flight', 0)))],
-        **late_steps_by_cause(diagnostics, period_ms),
+        **late_steps_by_cause(diagnostics),
     }
 
 

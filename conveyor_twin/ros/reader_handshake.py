@@ -39,9 +39,9 @@ def hello(reader: str, topics: Iterable[str]) -> DiagnosticStatus:
     return DiagnosticStatus(name=reader, values=[KeyValue(key='topics', value=','.join(topics))])
 
 
-def ready_reader(status: DiagnosticStatus) -> str:
-    """Return the reader a ready message answers ('' if it names none)."""
-    return next((kv.value for kv in status.values if kv.key == 'reader'), '')
+def value(status: DiagnosticStatus, key: str) -> str:
+    """Return the value of ``key`` in a hello or ready message ('' if it has none)."""
+    return next((kv.value for kv in status.values if kv.key == key), '')
 
 
 def writers_reach(node: Any, reader: str, topics: Tuple[str, ...]) -> bool:
@@ -80,8 +80,7 @@ class HandshakeResponder:
         self._timer = None
 
     def _on_hello(self, status: DiagnosticStatus) -> None:
-        topics = next((kv.value for kv in status.values if kv.key == 'topics'), '')
-        self._pending[status.name] = tuple(t for t in topics.split(',') if t)
+        self._pending[status.name] = tuple(t for t in value(status, 'topics').split(',') if t)
         if self._timer is None:
             self._timer = self._node.create_timer(POLL_PERIOD, self._poll)
         else:
@@ -117,7 +116,7 @@ class HandshakeReader:
         self._hello.publish(hello(self.name, self.topics))
 
     def _on_ready(self, status: DiagnosticStatus) -> None:
-        if ready_reader(status) == self.name:
+        if value(status, 'reader') == self.name:
             self.answered.add(status.name)
 
     def writers(self) -> set:
